@@ -1,0 +1,29 @@
+"""camtraj: previs USD camera moves to motion-control camera robot moves."""
+
+from camtraj.errors import (
+    CamtrajError,
+    InfeasibleError,
+    InputError,
+    LimitError,
+    RobotFileError,
+    ShotFileError,
+    UnreachableError,
+    UnreachableFramesError,
+)
+from camtraj.robot import JOINT_NAMES, Robot
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "JOINT_NAMES",
+    "CamtrajError",
+    "InfeasibleError",
+    "InputError",
+    "LimitError",
+    "Robot",
+    "RobotFileError",
+    "ShotFileError",
+    "UnreachableError",
+    "UnreachableFramesError",
+    "__version__",
+]

@@ -1,0 +1,109 @@
+"""Typed errors. Library code raises these; only the CLI turns them into exit codes.
+
+Exit codes (design.md §5): 2 for bad input or usage, 3 when the shot cannot be done as asked.
+"""
+
+from __future__ import annotations
+
+
+class CamtrajError(Exception):
+    """Base class of every error camtraj raises on purpose."""
+
+    exit_code = 1
+
+
+class InputError(CamtrajError):
+    """Bad input or usage: unreadable file, no or ambiguous camera, invalid robot file."""
+
+    exit_code = 2
+
+
+class RobotFileError(InputError):
+    """A robot description file is missing a value, has an unknown key or a value out of range."""
+
+
+class ShotFileError(InputError):
+    """A USD shot cannot be read or has no usable camera animation."""
+
+
+class InfeasibleError(CamtrajError):
+    """The shot cannot be done as asked (unreachable frames, limits exceeded)."""
+
+    exit_code = 3
+
+
+class UnreachableError(InfeasibleError):
+    """A target pose has no inverse-kinematics solution inside the joint limits.
+
+    Attributes:
+        miss: By how much the target misses the workspace, in the unit of ``miss_unit``.
+        miss_unit: ``"m"`` for a distance, ``"rad"`` for an angle.
+        axis: The joint whose limit is the binding reason, if one is, else ``None``.
+        frame: The film frame number, when the error is about a frame of a shot.
+    """
+
+    def __init__(
+        self,
+        reason: str,
+        *,
+        miss: float,
+        miss_unit: str = "m",
+        axis: str | None = None,
+        frame: int | None = None,
+    ) -> None:
+        self.reason = reason
+        self.miss = float(miss)
+        self.miss_unit = miss_unit
+        self.axis = axis
+        self.frame = frame
+        super().__init__(self._message())
+
+    def _message(self) -> str:
+        where = f"frame {self.frame}: " if self.frame is not None else ""
+        return f"{where}{self.reason}"
+
+    def at_frame(self, frame: int) -> UnreachableError:
+        """The same error, stamped with the film frame it happened on."""
+        return UnreachableError(
+            self.reason, miss=self.miss, miss_unit=self.miss_unit, axis=self.axis, frame=frame
+        )
+
+
+class UnreachableFramesError(InfeasibleError):
+    """Several frames of a shot are unreachable; ``errors`` holds one error per frame."""
+
+    def __init__(self, errors: list[UnreachableError]) -> None:
+        self.errors = errors
+        frames = [e.frame for e in errors]
+        worst = max(errors, key=lambda e: e.miss if e.miss_unit == "m" else e.miss * 1.0)
+        span = _frame_ranges([f for f in frames if f is not None])
+        msg = (
+            f"{len(errors)} frame(s) cannot be reached ({span}); worst: {worst}"
+        )
+        super().__init__(msg)
+
+
+class LimitError(InfeasibleError):
+    """The timed move exceeds a velocity, acceleration or jerk limit."""
+
+
+def _frame_ranges(frames: list[int]) -> str:
+    """Compress [3, 4, 5, 9] into 'frames 3-5, 9'."""
+    if not frames:
+        return "no frame numbers"
+    frames = sorted(set(frames))
+    parts: list[str] = []
+    start = prev = frames[0]
+    for f in frames[1:]:
+        if f == prev + 1:
+            prev = f
+            continue
+        parts.append(f"{start}-{prev}" if prev != start else f"{start}")
+        start = prev = f
+    parts.append(f"{start}-{prev}" if prev != start else f"{start}")
+    return "frames " + ", ".join(parts)
+
+
+def frame_ranges(frames: list[int]) -> str:
+    """Public form of the frame-range formatter, for reports."""
+    return _frame_ranges(frames)

@@ -1,0 +1,430 @@
+"""The PRRPR-S camera robot: its description file, DH model and forward kinematics.
+
+Conventions (design.md §2–3): SI units (m, rad), robot base frame with x along the track and
+z up, joints ordered track, rotate, lift, extend, elbow, pan, tilt, roll. Transforms are named
+``a2b``: ``flange2base`` maps flange coordinates into base coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.errors import RobotFileError
+
+Array = NDArray[np.float64]
+
+JOINT_NAMES: tuple[str, ...] = (
+    "track", "rotate", "lift", "extend", "elbow", "pan", "tilt", "roll",
+)
+JOINT_KINDS: tuple[str, ...] = (
+    "prismatic", "revolute", "revolute", "prismatic", "revolute", "revolute", "revolute",
+    "revolute",
+)
+N_JOINTS = len(JOINT_NAMES)
+PRISMATIC = np.array([k == "prismatic" for k in JOINT_KINDS])
+REVOLUTE = ~PRISMATIC
+
+
+@dataclass(frozen=True)
+class DHRow:
+    """One standard DH transform ``Rz(theta0 + s*q) Tz(d0 + s*q) Tx(a) Rx(alpha)``.
+
+    ``joint`` is the index of the joint variable that moves this row (``None`` for the fixed
+    A0), ``kind`` says whether it turns theta or slides d, ``sign`` is +1 or -1 (A8 turns
+    the other way, design.md §3).
+    """
+
+    theta0: float
+    d0: float
+    a: float
+    alpha: float
+    joint: int | None
+    kind: str
+    sign: float = 1.0
+
+
+@dataclass(frozen=True)
+class DHConstants:
+    """The paper's fixed lengths [m]."""
+
+    r10: float = 1.000
+    r2: float = 0.300
+    l3: float = 0.333
+    r40: float = 2.500
+    r6: float = 0.963
+
+    def rows(self) -> tuple[DHRow, ...]:
+        """The nine DH transforms A0..A8 of the SM paper's Table 1 / eq. (1)."""
+        h = math.pi / 2
+        return (
+            DHRow(h, 0.0, 0.0, h, None, "fixed"),
+            DHRow(0.0, self.r10, 0.0, -h, 0, "prismatic"),
+            DHRow(-h, self.r2, 0.0, -h, 1, "revolute"),
+            DHRow(-h, 0.0, self.l3, -h, 2, "revolute"),
+            DHRow(0.0, self.r40, 0.0, h, 3, "prismatic"),
+            DHRow(h, 0.0, 0.0, -h, 4, "revolute"),
+            DHRow(0.0, self.r6, 0.0, h, 5, "revolute"),
+            DHRow(-h, 0.0, 0.0, -h, 6, "revolute"),
+            DHRow(0.0, 0.0, 0.0, 0.0, 7, "revolute", -1.0),
+        )
+
+
+@dataclass(frozen=True)
+class ControllerUnits:
+    """Joint value to motor counts: ``counts = offset + sign * scale * q`` (q in m or rad)."""
+
+    scale: float
+    offset: float = 0.0
+    sign: int = 1
+
+    def counts(self, q: ArrayLike) -> Array:
+        return self.offset + self.sign * self.scale * np.asarray(q, dtype=float)
+
+
+@dataclass(frozen=True)
+class IKSettings:
+    """How the redundancy (track, extend) is resolved.
+
+    objective: ``"smooth"`` (margins from full stretch and limits) or ``"paper"``.
+    stretch_margin: minimum elbow angle away from full stretch [rad] (smooth only).
+    limit_margin: per-joint margin kept inside the position limits [m or rad], shape (8,).
+    """
+
+    objective: str = "smooth"
+    stretch_margin: float = math.radians(10.0)
+    limit_margin: Array = field(
+        default_factory=lambda: np.where(PRISMATIC, 0.02, math.radians(2.0))
+    )
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A PRRPR-S camera robot: geometry, limits, weights, mount and IK settings.
+
+    Every per-joint array has shape (8,) in joint order, SI units.
+    """
+
+    name: str
+    dh: DHConstants
+    lower: Array
+    upper: Array
+    max_velocity: Array
+    max_acceleration: Array
+    max_jerk: Array
+    weights: Array
+    home: Array
+    camera2flange: Array
+    ik: IKSettings
+    controller: dict[str, ControllerUnits] = field(default_factory=dict)
+    source: str = "builtin"
+    joint_names: tuple[str, ...] = JOINT_NAMES
+    joint_kinds: tuple[str, ...] = JOINT_KINDS
+
+    # -- construction -------------------------------------------------------------------
+    @classmethod
+    def default(cls) -> Robot:
+        """The papers' robot with camtraj's documented default limits."""
+        text = resources.files("camtraj").joinpath("data/robot.toml").read_text()
+        return cls.from_toml_text(text, source="builtin robot.toml")
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Robot:
+        """Load a robot description file; every error names the file and the key."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            msg = f"robot file {path}: cannot read it ({exc.strerror or exc})"
+            raise RobotFileError(msg) from exc
+        return cls.from_toml_text(text, source=str(path))
+
+    @classmethod
+    def from_toml_text(cls, text: str, *, source: str = "<text>") -> Robot:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            msg = f"robot file {source}: not valid TOML ({exc})"
+            raise RobotFileError(msg) from exc
+        return _robot_from_dict(data, source)
+
+    # -- kinematics ---------------------------------------------------------------------
+    def link_frames(self, q: ArrayLike) -> Array:
+        """Frames 0..8 (after A0..A8) in the base frame, shape (..., 9, 4, 4) for q (..., 8)."""
+        return link_frames(self.dh, q)
+
+    def fk(self, q: ArrayLike) -> Array:
+        """Flange (frame 8) pose in the base frame: ``flange2base``, shape (..., 4, 4) [m]."""
+        return self.link_frames(q)[..., -1, :, :]
+
+    def camera_pose(self, q: ArrayLike) -> Array:
+        """Camera pose in the base frame (``camera2base``), shape (..., 4, 4)."""
+        return self.fk(q) @ self.camera2flange
+
+    def within_limits(self, q: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """Whether each joint vector is inside the position limits, shape (...,)."""
+        qa = np.asarray(q, dtype=float)
+        return np.all((qa >= self.lower - tol) & (qa <= self.upper + tol), axis=-1)
+
+    def counts(self, q: ArrayLike) -> dict[str, Array]:
+        """Controller counts for the axes that have controller units."""
+        qa = np.asarray(q, dtype=float)
+        return {
+            name: unit.counts(qa[..., JOINT_NAMES.index(name)])
+            for name, unit in self.controller.items()
+        }
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-friendly summary (for metadata and reports)."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "joints": list(self.joint_names),
+            "lower": self.lower.tolist(),
+            "upper": self.upper.tolist(),
+            "max_velocity": self.max_velocity.tolist(),
+            "max_acceleration": self.max_acceleration.tolist(),
+            "max_jerk": self.max_jerk.tolist(),
+            "weights": self.weights.tolist(),
+            "ik_objective": self.ik.objective,
+        }
+
+
+def dh_matrices(dh: DHConstants, q: ArrayLike) -> Array:
+    """The nine DH transforms for joint vectors q (..., 8), shape (..., 9, 4, 4)."""
+    qa = np.asarray(q, dtype=float)
+    if qa.shape[-1] != N_JOINTS:
+        msg = f"joint vectors must have {N_JOINTS} values, got shape {qa.shape}"
+        raise ValueError(msg)
+    batch = qa.shape[:-1]
+    rows = dh.rows()
+    theta = np.empty((*batch, len(rows)))
+    d = np.empty_like(theta)
+    for i, row in enumerate(rows):
+        qi = row.sign * qa[..., row.joint] if row.joint is not None else 0.0
+        theta[..., i] = row.theta0 + (qi if row.kind == "revolute" else 0.0)
+        d[..., i] = row.d0 + (qi if row.kind == "prismatic" else 0.0)
+    a = np.array([r.a for r in rows])
+    alpha = np.array([r.alpha for r in rows])
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    A = np.zeros((*batch, len(rows), 4, 4))
+    A[..., 0, 0] = ct
+    A[..., 0, 1] = -st * ca
+    A[..., 0, 2] = st * sa
+    A[..., 0, 3] = a * ct
+    A[..., 1, 0] = st
+    A[..., 1, 1] = ct * ca
+    A[..., 1, 2] = -ct * sa
+    A[..., 1, 3] = a * st
+    A[..., 2, 1] = sa
+    A[..., 2, 2] = ca
+    A[..., 2, 3] = d
+    A[..., 3, 3] = 1.0
+    return A
+
+
+def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
+    """Cumulative products A0·…·Ai, shape (..., 9, 4, 4)."""
+    A = dh_matrices(dh, q)
+    out = np.empty_like(A)
+    T = A[..., 0, :, :]
+    out[..., 0, :, :] = T
+    for i in range(1, A.shape[-3]):
+        T = T @ A[..., i, :, :]
+        out[..., i, :, :] = T
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Robot description file
+# ---------------------------------------------------------------------------------------------
+
+_TOP_KEYS = {"robot", "dh", "joints", "mount", "ik", "controller"}
+_JOINT_KEYS = {
+    "kind", "min", "max", "max_velocity", "max_acceleration", "max_jerk", "weight", "home",
+}
+
+
+def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
+    where = f"robot file {source}"
+
+    def fail(key: str, what: str) -> RobotFileError:
+        return RobotFileError(f"{where}: [{key}] {what}")
+
+    _no_unknown(data, _TOP_KEYS, where, "top level")
+    meta = _table(data, "robot", where, required=False)
+    _no_unknown(meta, {"name", "angle_unit"}, where, "[robot]")
+    name = str(meta.get("name", "camera robot"))
+    unit = meta.get("angle_unit", "deg")
+    if unit not in ("deg", "rad"):
+        raise fail("robot", f"angle_unit = {unit!r}: must be \"deg\" or \"rad\"")
+    ang = math.pi / 180.0 if unit == "deg" else 1.0
+
+    dh_tab = _table(data, "dh", where, required=False)
+    _no_unknown(dh_tab, {"r10", "r2", "l3", "r40", "r6"}, where, "[dh]")
+    defaults = DHConstants()
+    dh_vals: dict[str, float] = {}
+    for key in ("r10", "r2", "l3", "r40", "r6"):
+        val = _number(dh_tab.get(key, getattr(defaults, key)), f"dh.{key}", where)
+        if not 0.0 <= val <= 50.0:
+            raise fail(f"dh.{key}", f"= {val}: must be between 0 and 50 m")
+        dh_vals[key] = val
+    dh = DHConstants(**dh_vals)
+    if dh.r6 <= 0 or dh.r40 <= 0:
+        raise fail("dh", "r40 and r6 must be positive lengths")
+
+    joints = _table(data, "joints", where, required=True)
+    _no_unknown(joints, set(JOINT_NAMES), where, "[joints]")
+    cols: dict[str, list[float]] = {k: [] for k in _JOINT_KEYS - {"kind"}}
+    for jname, kind in zip(JOINT_NAMES, JOINT_KINDS, strict=True):
+        key = f"joints.{jname}"
+        if jname not in joints:
+            raise fail(key, "is missing: every axis needs its table")
+        jt = joints[jname]
+        if not isinstance(jt, dict):
+            raise fail(key, "must be a table")
+        _no_unknown(jt, _JOINT_KEYS, where, f"[{key}]")
+        if jt.get("kind", kind) != kind:
+            raise fail(f"{key}.kind", f"= {jt.get('kind')!r}: axis {jname} is {kind}")
+        scale = 1.0 if kind == "prismatic" else ang
+        for col in cols:
+            if col not in jt:
+                if col == "home":
+                    cols[col].append(0.0)
+                    continue
+                raise fail(f"{key}.{col}", "is missing")
+            cols[col].append(_number(jt[col], f"{key}.{col}", where) * (
+                1.0 if col == "weight" else scale
+            ))
+        lo, hi = cols["min"][-1], cols["max"][-1]
+        if not lo < hi:
+            raise fail(f"{key}", f"min ({jt['min']}) must be below max ({jt['max']})")
+        for col in ("max_velocity", "max_acceleration", "max_jerk"):
+            if not cols[col][-1] > 0:
+                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive")
+        if cols["weight"][-1] < 0:
+            raise fail(f"{key}.weight", f"= {jt['weight']}: must not be negative")
+        if not lo <= cols["home"][-1] <= hi:
+            raise fail(f"{key}.home", f"= {jt.get('home')}: outside [{jt['min']}, {jt['max']}]")
+    elbow = JOINT_NAMES.index("elbow")
+    if cols["min"][elbow] < -math.pi - 1e-9 or cols["max"][elbow] > 1e-9:
+        raise fail(
+            "joints.elbow", "limits must lie inside [-180, 0] deg (the mechanism's range)"
+        )
+
+    mount = _table(data, "mount", where, required=False)
+    _no_unknown(mount, {"rotation", "offset"}, where, "[mount]")
+    rot = np.asarray(
+        mount.get("rotation", [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]), dtype=float
+    )
+    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+        raise fail("mount.rotation", "must be a 3x3 matrix of numbers")
+    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise fail("mount.rotation", "must be a proper rotation (orthonormal, det +1)")
+    offset = np.asarray(mount.get("offset", [0.0, 0.0, 0.0]), dtype=float)
+    if offset.shape != (3,) or not np.all(np.isfinite(offset)) or np.abs(offset).max() > 5:
+        raise fail("mount.offset", "must be three numbers [m], each within ±5 m")
+    camera2flange = np.eye(4)
+    camera2flange[:3, :3] = rot
+    camera2flange[:3, 3] = offset
+
+    ik_tab = _table(data, "ik", where, required=False)
+    _no_unknown(
+        ik_tab,
+        {"objective", "stretch_margin", "limit_margin_revolute", "limit_margin_prismatic"},
+        where,
+        "[ik]",
+    )
+    objective = ik_tab.get("objective", "smooth")
+    if objective not in ("smooth", "paper"):
+        raise fail("ik.objective", f"= {objective!r}: must be \"smooth\" or \"paper\"")
+    stretch = _number(ik_tab.get("stretch_margin", 10.0 * (math.pi / 180) / ang),
+                      "ik.stretch_margin", where) * ang
+    if not 0.0 <= stretch <= math.radians(60):
+        raise fail("ik.stretch_margin", "must be between 0 and 60 deg")
+    m_rev = _number(ik_tab.get("limit_margin_revolute", math.radians(2.0) / ang),
+                    "ik.limit_margin_revolute", where) * ang
+    m_pri = _number(ik_tab.get("limit_margin_prismatic", 0.02), "ik.limit_margin_prismatic", where)
+    if not (0.0 <= m_rev <= math.radians(30) and 0.0 <= m_pri <= 0.5):
+        raise fail("ik", "limit margins must be within [0, 30 deg] and [0, 0.5 m]")
+    lower, upper = np.array(cols["min"]), np.array(cols["max"])
+    margin = np.where(PRISMATIC, m_pri, m_rev)
+    if np.any(2 * margin >= upper - lower):
+        raise fail("ik", "limit margins leave no room inside an axis's limits")
+    ik = IKSettings(objective=objective, stretch_margin=stretch, limit_margin=margin)
+
+    controller: dict[str, ControllerUnits] = {}
+    ctab = _table(data, "controller", where, required=False)
+    _no_unknown(ctab, set(JOINT_NAMES), where, "[controller]")
+    for jname, ct in ctab.items():
+        key = f"controller.{jname}"
+        if not isinstance(ct, dict):
+            raise fail(key, "must be a table")
+        _no_unknown(ct, {"scale", "offset", "sign"}, where, f"[{key}]")
+        if "scale" not in ct:
+            raise fail(f"{key}.scale", "is missing")
+        sign = ct.get("sign", 1)
+        if sign not in (1, -1):
+            raise fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
+        controller[jname] = ControllerUnits(
+            scale=_number(ct["scale"], f"{key}.scale", where),
+            offset=_number(ct.get("offset", 0.0), f"{key}.offset", where),
+            sign=int(sign),
+        )
+
+    return Robot(
+        name=name,
+        dh=dh,
+        lower=lower,
+        upper=upper,
+        max_velocity=np.array(cols["max_velocity"]),
+        max_acceleration=np.array(cols["max_acceleration"]),
+        max_jerk=np.array(cols["max_jerk"]),
+        weights=np.array(cols["weight"]),
+        home=np.array(cols["home"]),
+        camera2flange=camera2flange,
+        ik=ik,
+        controller=controller,
+        source=source,
+    )
+
+
+def _table(data: dict[str, Any], key: str, where: str, *, required: bool) -> dict[str, Any]:
+    if key not in data:
+        if required:
+            msg = f"{where}: [{key}] is missing"
+            raise RobotFileError(msg)
+        return {}
+    val = data[key]
+    if not isinstance(val, dict):
+        msg = f"{where}: [{key}] must be a table"
+        raise RobotFileError(msg)
+    return val
+
+
+def _no_unknown(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        msg = (
+            f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
+            f"allowed: {', '.join(sorted(allowed))}"
+        )
+        raise RobotFileError(msg)
+
+
+def _number(value: Any, key: str, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        msg = f"{where}: [{key}] = {value!r}: must be a number"
+        raise RobotFileError(msg)
+    if not math.isfinite(value):
+        msg = f"{where}: [{key}] = {value!r}: must be finite"
+        raise RobotFileError(msg)
+    return float(value)
