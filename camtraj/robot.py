@@ -95,11 +95,13 @@ class IKSettings:
 
     objective: ``"smooth"`` (margins from full stretch and limits) or ``"paper"``.
     stretch_margin: minimum elbow angle away from full stretch [rad] (smooth only).
+    wrist_margin: minimum tilt angle away from ±90°, where pan and roll align [rad].
     limit_margin: per-joint margin kept inside the position limits [m or rad], shape (8,).
     """
 
     objective: str = "smooth"
-    stretch_margin: float = math.radians(10.0)
+    stretch_margin: float = math.radians(20.0)
+    wrist_margin: float = math.radians(15.0)
     limit_margin: Array = field(
         default_factory=lambda: np.where(PRISMATIC, 0.02, math.radians(2.0))
     )
@@ -171,7 +173,10 @@ class Robot:
     def within_limits(self, q: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
         """Whether each joint vector is inside the position limits, shape (...,)."""
         qa = np.asarray(q, dtype=float)
-        return np.all((qa >= self.lower - tol) & (qa <= self.upper + tol), axis=-1)
+        inside: NDArray[np.bool_] = np.all(
+            (qa >= self.lower - tol) & (qa <= self.upper + tol), axis=-1
+        )
+        return inside
 
     def counts(self, q: ArrayLike) -> dict[str, Array]:
         """Controller counts for the axes that have controller units."""
@@ -339,17 +344,22 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     ik_tab = _table(data, "ik", where, required=False)
     _no_unknown(
         ik_tab,
-        {"objective", "stretch_margin", "limit_margin_revolute", "limit_margin_prismatic"},
+        {"objective", "stretch_margin", "wrist_margin", "limit_margin_revolute",
+         "limit_margin_prismatic"},
         where,
         "[ik]",
     )
     objective = ik_tab.get("objective", "smooth")
     if objective not in ("smooth", "paper"):
         raise fail("ik.objective", f"= {objective!r}: must be \"smooth\" or \"paper\"")
-    stretch = _number(ik_tab.get("stretch_margin", 10.0 * (math.pi / 180) / ang),
+    stretch = _number(ik_tab.get("stretch_margin", math.radians(20.0) / ang),
                       "ik.stretch_margin", where) * ang
     if not 0.0 <= stretch <= math.radians(60):
         raise fail("ik.stretch_margin", "must be between 0 and 60 deg")
+    wrist = _number(ik_tab.get("wrist_margin", math.radians(15.0) / ang),
+                    "ik.wrist_margin", where) * ang
+    if not 0.0 <= wrist <= math.radians(45):
+        raise fail("ik.wrist_margin", "must be between 0 and 45 deg")
     m_rev = _number(ik_tab.get("limit_margin_revolute", math.radians(2.0) / ang),
                     "ik.limit_margin_revolute", where) * ang
     m_pri = _number(ik_tab.get("limit_margin_prismatic", 0.02), "ik.limit_margin_prismatic", where)
@@ -359,7 +369,8 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     margin = np.where(PRISMATIC, m_pri, m_rev)
     if np.any(2 * margin >= upper - lower):
         raise fail("ik", "limit margins leave no room inside an axis's limits")
-    ik = IKSettings(objective=objective, stretch_margin=stretch, limit_margin=margin)
+    ik = IKSettings(objective=objective, stretch_margin=stretch, wrist_margin=wrist,
+                    limit_margin=margin)
 
     controller: dict[str, ControllerUnits] = {}
     ctab = _table(data, "controller", where, required=False)

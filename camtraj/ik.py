@@ -1,0 +1,817 @@
+"""Inverse kinematics of the PRRPR-S camera robot by the SM method.
+
+The SM method (He 2018) fixes the two redundant prismatic axes, track (r1) and extend (r4), solves
+the remaining six axes in closed form, and searches (r1, r4) for the solution that minimises the
+weighted axis motion ``F = sum(w_i * |q_i - q_i,prev|)``.
+
+Closed-form six-axis substructure (design.md §3). The flange origin is the wrist centre W, so
+with r1 and r4 fixed:
+
+* the shoulder S = (r1 + r10, 0, r2) lies on the vertical rotate axis; rotate points the arm's
+  vertical plane at W (front branch) or away from it (back branch);
+* in that plane the arm is a planar chain S -> U (l3, perpendicular to the arm) -> E
+  (r4 + r40 along the arm) -> W (r6, forearm), a triangle S-E-W with two elbow branches;
+* pan/tilt/roll form a spherical wrist with two branches (tilt flip); where pan and roll align
+  (tilt = ±90°) the previous pan is kept.
+
+Search. For one r1 the feasible extend values form an interval known in closed form (reach with
+the stretch margin, and a superset bound from the elbow's range); r1 itself is confined to at
+most two intervals around the target. Because moving a prismatic axis by d costs at least
+``w_min * |d|``, the optimum lies within ``F_best / w_min`` (L1) of the previous (r1, r4): the
+search box shrinks to that ball as soon as any feasible point is known. Inside the box a grid
+that contains the objective's kinks exactly (r1 = r1_prev, r4 = r4_prev, the box and reach
+boundaries) is zoomed around the best candidates. On smooth paths most frames are settled by a
+certificate instead: when holding track and extend still is feasible and the other axes'
+sensitivity to them is far below their weights, no other point can be cheaper.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.errors import UnreachableError, UnreachableFramesError
+from camtraj.robot import JOINT_NAMES, PRISMATIC, REVOLUTE, DHConstants, Robot
+
+Array = NDArray[np.float64]
+
+TWO_PI = 2.0 * math.pi
+N_BRANCHES = 8  # rotate front/back x elbow up/down x wrist flip
+_TRACK, _ROTATE, _LIFT, _EXTEND, _ELBOW, _PAN, _TILT, _ROLL = range(8)
+_WRIST_EPS = 1e-10  # |cos tilt| below this is the wrist singularity
+_FAST_RADIUS = 1e-3  # [m] certificate only when the competing region is this small
+_CERT_SAFETY = 0.5  # sensitivity must stay below this fraction of the prismatic weights
+_EDGE = 1e-12  # rounding allowance at closed-form boundaries (reach, limits) [-, m, rad]
+_FRONT_BACK = np.array([0.0, math.pi])
+_SIGN2 = np.array([1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class IKSolution:
+    """One solved pose.
+
+    Attributes:
+        q: Joint vector (8,) [m, rad].
+        cost: F = sum(w * |q - previous|) with the robot's weights (per m / per rad).
+        branch: Index 0..7 of the closed-form branch (rotate back, elbow, wrist flip bits).
+        within_margins: False when the smooth objective's margins could not be kept and the
+            solution uses the hard limits instead (always True for the paper objective).
+        within_step: False when a requested per-frame step bound could not be kept.
+    """
+
+    q: Array
+    cost: float
+    branch: int
+    within_margins: bool = True
+    within_step: bool = True
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """Limits in force for one solve: position limits, stretch margin, objective name."""
+
+    lower: Array
+    upper: Array
+    stretch_margin: float
+    wrist_margin: float = 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Closed-form six-axis substructure
+# ---------------------------------------------------------------------------------------------
+
+
+def six_axis_solutions(
+    dh: DHConstants,
+    target: Array,
+    r1: ArrayLike,
+    r4: ArrayLike,
+    previous: Array,
+    lower: Array,
+    upper: Array,
+    stretch_margin: float = 0.0,
+    wrist_margin: float = 0.0,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """All closed-form branches for fixed track and extend values.
+
+    Args:
+        dh: The robot's DH constants.
+        target: Flange pose in the base frame (``flange2base``), shape (4, 4) [m].
+        r1: Track values, shape (N,) [m].
+        r4: Extend values, shape (N,) [m].
+        previous: Joint vector the revolute axes stay nearest to (2π-equivalents), (8,).
+        lower, upper: Position limits (8,) the solutions must respect.
+        stretch_margin: Minimum elbow angle away from full stretch [rad].
+        wrist_margin: Minimum tilt angle away from the wrist singularity (±90°) [rad].
+
+    Returns:
+        ``q`` of shape (N, 8, 8): for each candidate and branch, the joint vector; and the
+        feasibility mask of shape (N, 8). Infeasible entries hold NaN or out-of-limit values.
+    """
+    r1a = np.asarray(r1, dtype=float)
+    r4a = np.asarray(r4, dtype=float)
+    n = r1a.shape[0]
+    W = target[:3, 3]
+    R = target[:3, :3]
+    dx = W[0] - dh.r10 - r1a  # (N,)
+    dy = W[1]
+    dz = W[2] - dh.r2
+    hor = np.hypot(dx, dy)
+    ws2 = np.maximum(hor * hor + dz * dz, 1e-300)
+
+    # rotate: front (arm plane towards W) and back (plane turned by pi, arm reaching over)
+    th2f = np.arctan2(dy, dx) if dy != 0.0 or np.all(dx != 0.0) else np.where(
+        hor > 1e-12, np.arctan2(dy, dx), previous[_ROTATE])
+    th2 = th2f[:, None] + _FRONT_BACK  # (N, 2)
+    rho = hor[:, None] * _SIGN2  # (N, 2) signed horizontal distance in the arm plane
+
+    L = r4a + dh.r40
+    dse2 = L * L + dh.l3 * dh.l3
+    cos_g = (ws2 + dse2 - dh.r6 * dh.r6) / (2.0 * np.sqrt(dse2 * ws2))
+    # interior angle at the elbow E (pi at full stretch)
+    cos_e = (dse2 + dh.r6 * dh.r6 - ws2) / (2.0 * dh.r6 * np.sqrt(dse2))
+    reach_ok = (np.abs(cos_g) <= 1.0 + _EDGE) & (cos_e >= -math.cos(stretch_margin) - _EDGE)
+    gamma = np.arccos(np.minimum(np.maximum(cos_g, -1.0), 1.0))  # (N,)
+    beta = np.arctan2(dh.l3, L)
+
+    # elbow branches: arm elevation a = angle(w) - beta -/+ gamma   -> (N, 2, 2)
+    a = (np.arctan2(dz, rho) - beta[:, None])[:, :, None] - gamma[:, None, None] * _SIGN2
+    ca, sa = np.cos(a), np.sin(a)
+    Lb = L[:, None, None]
+    dpx = rho[:, :, None] - (Lb * ca - dh.l3 * sa)  # forearm vector W - E in the plane
+    dpz = dz - (Lb * sa + dh.l3 * ca)
+    psi = np.arctan2(dpx, -dpz)  # forearm angle; theta3 + theta5 = -psi
+    cs, ss = np.cos(psi), -np.sin(psi)  # cos/sin of sigma = theta3 + theta5
+
+    # spherical wrist: R58 = R05^T R. With c2, s2 of rotate, the columns of R05 are
+    # x5 = (c2 cs, s2 cs, -ss), y5 = (s2, -c2, 0), z5 = (-c2 ss, -s2 ss, -cs).
+    c2 = np.cos(th2)
+    s2 = np.sin(th2)
+    P0 = (c2 * R[0, 0] + s2 * R[1, 0])[:, :, None]
+    P1 = (c2 * R[0, 1] + s2 * R[1, 1])[:, :, None]
+    P2 = (c2 * R[0, 2] + s2 * R[1, 2])[:, :, None]
+    m02 = cs * P2 - ss * R[2, 2]
+    m12 = (s2 * R[0, 2] - c2 * R[1, 2])[:, :, None]
+    m22 = -ss * P2 - cs * R[2, 2]
+    m20 = -ss * P0 - cs * R[2, 0]
+    m21 = -ss * P1 - cs * R[2, 1]
+    c7abs = np.hypot(m02, m12)
+    s7 = np.minimum(np.maximum(m22, -1.0), 1.0)
+
+    # wrist flip: cos(tilt) = +|c7| / -|c7|   -> (N, 2, 2, 2)
+    sg = _SIGN2
+    th7 = np.arctan2(s7[..., None], c7abs[..., None] * sg)
+    th6 = np.arctan2(m12[..., None] * sg, m02[..., None] * sg)  # (N,2,2,2) by broadcasting
+    th8 = np.arctan2(m21[..., None] * -sg, m20[..., None] * -sg)
+    singular = c7abs < _WRIST_EPS
+    if singular.any():
+        # pan and roll aligned: keep the previous pan, roll takes the rest
+        m00 = cs * P0 - ss * R[2, 0]
+        m10 = (s2 * R[0, 0] - c2 * R[1, 0])[:, :, None]
+        s7s = np.where(s7 >= 0, 1.0, -1.0)[..., None]
+        combo = np.arctan2(s7s * m10[..., None], s7s * m00[..., None])
+        th6_keep = np.full_like(th6, previous[_PAN])
+        th8_keep = np.where(s7s > 0, th6_keep - combo, combo - th6_keep)
+        th6 = np.where(singular[..., None], th6_keep, th6)
+        th8 = np.where(singular[..., None], th8_keep, th8)
+
+    shape = (n, 2, 2, 2)
+    q5 = np.empty((*shape, 8))
+    q5[..., _TRACK] = r1a[:, None, None, None]
+    q5[..., _ROTATE] = th2[:, :, None, None]
+    q5[..., _LIFT] = -a[..., None]
+    q5[..., _EXTEND] = r4a[:, None, None, None]
+    q5[..., _ELBOW] = (a - psi)[..., None]
+    q5[..., _PAN] = th6
+    q5[..., _TILT] = th7
+    q5[..., _ROLL] = th8
+    q = q5.reshape(n, N_BRANCHES, 8)
+
+    rev = q[..., 1:]  # every axis after track except extend is revolute: wrap all, restore
+    wrapped = _nearest_equivalent(rev, previous[1:], lower[1:], upper[1:])
+    wrapped[..., _EXTEND - 1] = r4a[:, None]
+    q[..., 1:] = wrapped
+    ok = ((q >= lower - _EDGE) & (q <= upper + _EDGE)).all(axis=-1) & reach_ok[:, None]
+    if wrist_margin > 0.0:
+        wrist_ok = np.broadcast_to((c7abs >= math.sin(wrist_margin))[..., None], shape)
+        ok &= wrist_ok.reshape(n, N_BRANCHES)
+    return q, ok
+
+
+def _nearest_equivalent(x: Array, prev: Array, lo: Array, hi: Array) -> Array:
+    """The 2π-equivalent of each angle nearest ``prev`` inside [lo, hi] (else the nearest)."""
+    y = x + TWO_PI * np.rint((prev - x) * (1.0 / TWO_PI))
+    out_y = (y < lo) | (y > hi)
+    if not out_y.any():
+        return y
+    alt = y - TWO_PI * np.sign(y - prev)
+    alt_in = (alt >= lo) & (alt <= hi)
+    return np.where(out_y & alt_in, alt, y)
+
+
+# ---------------------------------------------------------------------------------------------
+# Feasible region of (track, extend)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Region:
+    """Closed-form superset of the feasible (r1, r4) region for one target."""
+
+    dh: DHConstants
+    W: Array
+    r1_lo: float
+    r1_hi: float
+    r4_lo: float
+    r4_hi: float
+    stretch: float
+
+    def ws(self, r1: Array) -> Array:
+        dx = self.W[0] - self.dh.r10 - r1
+        ws: Array = np.sqrt(dx * dx + self.W[1] ** 2 + (self.W[2] - self.dh.r2) ** 2)
+        return ws
+
+    def r4_interval(self, r1: Array) -> tuple[Array, Array]:
+        """Extend range [lo, hi] that can reach W from track r1 (empty where lo > hi)."""
+        dh = self.dh
+        ws = self.ws(r1)
+        cm, sm = math.cos(self.stretch), math.sin(self.stretch)
+        dse_min = -dh.r6 * cm + np.sqrt(np.maximum(ws * ws - (dh.r6 * sm) ** 2, 0.0))
+        l_min = np.sqrt(np.maximum(dse_min * dse_min - dh.l3 * dh.l3, 0.0))
+        l_max = np.sqrt(np.maximum(ws * ws - (dh.r6 - dh.l3) ** 2, 0.0))
+        lo = np.maximum(l_min - dh.r40, self.r4_lo)
+        hi = np.minimum(l_max - dh.r40, self.r4_hi)
+        return lo, hi
+
+    def r1_kinks(self, r4: float) -> list[float]:
+        """Track values where extend ``r4`` is exactly at the end of its reach interval."""
+        dh = self.dh
+        cm, sm = math.cos(self.stretch), math.sin(self.stretch)
+        L = r4 + dh.r40
+        dse = math.hypot(L, dh.l3)
+        perp2 = self.W[1] ** 2 + (self.W[2] - dh.r2) ** 2
+        c = self.W[0] - dh.r10
+        out: list[float] = []
+        for ws2 in ((dse + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2, L * L + (dh.r6 - dh.l3) ** 2):
+            if ws2 > perp2:
+                d = math.sqrt(ws2 - perp2)
+                out += [c - d, c + d]
+        return [r for r in out if self.r1_lo <= r <= self.r1_hi]
+
+    def r1_intervals(self) -> tuple[list[tuple[float, float]], float]:
+        """Track intervals from which W is within reach, and the miss distance [m] if none."""
+        dh = self.dh
+        cm, sm = math.cos(self.stretch), math.sin(self.stretch)
+        dse_max = math.hypot(self.r4_hi + dh.r40, dh.l3)
+        ws_out = math.sqrt((dse_max + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2)
+        ws_in = math.sqrt((self.r4_lo + dh.r40) ** 2 + (dh.r6 - dh.l3) ** 2)
+        perp = math.hypot(self.W[1], self.W[2] - dh.r2)
+        if perp > ws_out:
+            return [], perp - ws_out
+        a_out = math.sqrt(ws_out * ws_out - perp * perp)
+        a_in = math.sqrt(max(ws_in * ws_in - perp * perp, 0.0))
+        c = self.W[0] - dh.r10
+        out: list[tuple[float, float]] = []
+        miss = math.inf
+        for lo, hi in ((c - a_out, c - a_in), (c + a_in, c + a_out)):
+            clo, chi = max(lo, self.r1_lo), min(hi, self.r1_hi)
+            if clo <= chi:
+                out.append((clo, chi))
+            else:
+                miss = min(miss, lo - self.r1_hi if lo > self.r1_hi else self.r1_lo - hi)
+        if len(out) == 2 and out[0][1] >= out[1][0]:
+            out = [(out[0][0], out[1][1])]
+        return out, miss
+
+
+# ---------------------------------------------------------------------------------------------
+# The search
+# ---------------------------------------------------------------------------------------------
+
+
+class _Problem:
+    """One target, one previous solution, one set of bounds; remembers the best point seen."""
+
+    def __init__(self, robot: Robot, target: Array, previous: Array, bounds: _Bounds) -> None:
+        self.robot = robot
+        self.target = target
+        self.prev = previous
+        self.bounds = bounds
+        self.w = robot.weights
+        self.w_min = float(min(self.w[_TRACK], self.w[_EXTEND]))
+        self.region = _Region(
+            robot.dh, target[:3, 3].copy(),
+            float(bounds.lower[_TRACK]), float(bounds.upper[_TRACK]),
+            float(bounds.lower[_EXTEND]), float(bounds.upper[_EXTEND]),
+            bounds.stretch_margin,
+        )
+        self.intervals, self.miss = self.region.r1_intervals()
+        self.best_q: Array | None = None
+        self.best_cost = math.inf
+        self.best_branch = -1
+        self.evaluations = 0
+        self.calls = 0
+
+    def evaluate(self, r1: Array, r4: Array) -> tuple[Array, Array]:
+        """Cost (N, 8) with inf where infeasible, and q (N, 8, 8). Records the best."""
+        b = self.bounds
+        q, ok = six_axis_solutions(self.robot.dh, self.target, r1, r4, self.prev,
+                                   b.lower, b.upper, b.stretch_margin, b.wrist_margin)
+        cost = np.where(ok, np.abs(q - self.prev) @ self.w, np.inf)
+        self.evaluations += r1.shape[0]
+        self.calls += 1
+        flat = int(np.argmin(cost))
+        c = float(cost.flat[flat])
+        if c < self.best_cost:
+            i, br = divmod(flat, N_BRANCHES)
+            self.best_cost, self.best_q, self.best_branch = c, q[i, br].copy(), br
+        return cost, q
+
+    def ball(self) -> float:
+        """Half-width [m] of the box that must hold the optimum (prismatic cost alone)."""
+        if self.w_min <= 0 or not math.isfinite(self.best_cost):
+            return math.inf
+        return self.best_cost / self.w_min
+
+    def clip_r4(self, r1: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """Extend nearest its previous value inside the reach interval, and where one exists."""
+        lo, hi = self.region.r4_interval(r1)
+        return np.minimum(np.maximum(self.prev[_EXTEND], lo), hi), lo <= hi
+
+    def r1_grid(self, lo: float, hi: float, n: int) -> Array:
+        """Up to n track values over [lo, hi] intersected with the reachable intervals."""
+        parts = []
+        for a, b in self.intervals:
+            a2, b2 = max(a, lo), min(b, hi)
+            if a2 <= b2:
+                parts.append(np.linspace(a2, b2, max(3, n // len(self.intervals))))
+        return np.concatenate(parts) if parts else np.empty(0)
+
+    # -- the line search: hold extend where it can (r4 = clip(r4_prev)), search track -------
+    def line_search(self) -> bool:
+        """Settle the frame on the curve r4 = clip(r4_prev, reach interval(r1)).
+
+        For a fixed track value, moving extend costs ``w_extend`` per metre, so while the other
+        axes' sensitivity to extend stays below that weight the best extend is the one nearest
+        its previous value inside the reach interval. That leaves a 1-D problem in track whose
+        kinks (track held, extend reaching the end of its interval) are known in closed form.
+        Returns False when the reduction cannot be trusted (the caller then searches in 2-D).
+        """
+        if not self.intervals or self.w_min <= 0:
+            return False
+        r1p, r4p = float(self.prev[_TRACK]), float(self.prev[_EXTEND])
+        h = 1e-7
+        kinks = [r1p] if any(a <= r1p <= b for a, b in self.intervals) else []
+        kinks += self.region.r1_kinks(r4p)
+        kinks += [x for ab in self.intervals for x in ab]
+        kinks_a = np.array(kinks)
+        r4k, okk = self.clip_r4(kinks_a)
+        # a first guess of the ball: prismatic cost of the cheapest kink + some revolute motion
+        prism = self.w[_TRACK] * np.abs(kinks_a - r1p) + self.w[_EXTEND] * np.abs(r4k - r4p)
+        guess = (float(np.min(np.where(okk, prism, np.inf))) + 500.0) / self.w_min
+        if not math.isfinite(guess):
+            return False
+        grid = self.r1_grid(r1p - guess, r1p + guess, 24)
+        # stencils: along the curve (track +-h) and across it (extend +-h) at every kink
+        r1_pts = np.concatenate([kinks_a, kinks_a - h, kinks_a + h, kinks_a, kinks_a, grid])
+        r4_curve, ok_curve = self.clip_r4(r1_pts)
+        nk = len(kinks)
+        r4_pts = r4_curve.copy()
+        r4_pts[3 * nk: 4 * nk] -= h
+        r4_pts[4 * nk: 5 * nk] += h
+        if not ok_curve[:nk].any() and not ok_curve[5 * nk:].any():
+            return False
+        cost, _ = self.evaluate(r1_pts, r4_pts)
+        f = cost.min(axis=1)
+        f_kink, f_grid = f[:nk], f[5 * nk:]
+        samples_r1, samples_f = [kinks_a, grid], [f_kink, f_grid]
+
+        # the grid must cover the whole ball; widen it once if it did not
+        ball = self.ball()
+        if ball > guess:
+            grid2 = self.r1_grid(r1p - ball, r1p + ball, 48)
+            cost2, _ = self.evaluate(grid2, self.clip_r4(grid2)[0])
+            samples_r1.append(grid2)
+            samples_f.append(cost2.min(axis=1))
+        all_r1 = np.concatenate(samples_r1)
+        all_f = np.concatenate(samples_f)
+
+        # holes: reachable track values in the ball whose held-extend point is infeasible on
+        # every branch (another limit binds there): the 1-D reduction cannot see past them
+        ball = self.ball()
+        in_ball = (all_r1 >= r1p - ball) & (all_r1 <= r1p + ball)
+        if np.any(in_ball & self.clip_r4(all_r1)[1] & ~np.isfinite(all_f)):
+            return False
+
+        # done without zooming when the best sample is a kink that is a local minimum
+        k = int(np.argmin(f_kink)) if nk else -1
+        at_kink = (
+            k >= 0
+            and math.isfinite(f_kink[k])
+            and f_kink[k] <= all_f.min()
+            and f[nk + k] >= f_kink[k]
+            and f[2 * nk + k] >= f_kink[k]
+        )
+        if not at_kink:
+            self._zoom_line(all_r1, all_f)
+        return self._extend_sensitivity_ok()
+
+    def _zoom_line(self, r1s: Array, fs: Array, tol: float = 1e-9) -> None:
+        """Refine the best track value of the 1-D curve by shrinking brackets."""
+        order = np.argsort(r1s)
+        r1s, fs = r1s[order], fs[order]
+        i = int(np.argmin(fs))
+        lo = r1s[max(i - 1, 0)]
+        hi = r1s[min(i + 1, len(r1s) - 1)]
+        r1p = float(self.prev[_TRACK])
+        while hi - lo > tol:
+            pts = np.linspace(lo, hi, 9)
+            if lo < r1p < hi:
+                pts = np.append(pts, r1p)
+            r4, ok = self.clip_r4(pts)
+            cost, _ = self.evaluate(pts[ok], r4[ok]) if ok.any() else (np.empty((0, 8)), None)
+            if cost.shape[0] == 0:
+                return
+            f = cost.min(axis=1)
+            pts = pts[ok]
+            j = int(np.argmin(f))
+            step = (hi - lo) / 8
+            lo, hi = max(pts[j] - step, lo), min(pts[j] + step, hi)
+
+    def _extend_sensitivity_ok(self) -> bool:
+        """Check the reduction at the best point: no extend value nearby is cheaper.
+
+        Holding extend at clip(r4_prev) is optimal for a fixed track value as long as the
+        other axes do not gain more than ``w_extend`` per metre of extend. Probe extend on both
+        sides of the best point at geometrically spaced offsets up to a few centimetres.
+        """
+        if self.best_q is None:
+            return False
+        q0 = self.best_q
+        f0 = self.best_cost
+        offsets = np.geomspace(1e-7, 0.05, 10)
+        r4 = np.concatenate([q0[_EXTEND] - offsets, q0[_EXTEND] + offsets])
+        r1 = np.full(r4.shape, q0[_TRACK])
+        self.evaluate(r1, r4)
+        return self.best_cost >= f0 - 1e-9 * max(1.0, f0)
+
+    # -- the vertex certificate (hold track and extend) ------------------------------------
+    def try_certificate(self) -> bool:
+        """Settle the frame at (r1_prev, r4_prev) if no other point can be cheaper."""
+        r1p, r4p = self.prev[_TRACK], self.prev[_EXTEND]
+        if self.w_min <= 0:
+            return False
+        lo, hi = self.region.r4_interval(np.array([r1p]))
+        if not lo[0] <= r4p <= hi[0]:
+            return False
+        h = 1e-6
+        r1 = np.array([r1p, r1p + h, r1p - h, r1p, r1p])
+        r4 = np.array([r4p, r4p, r4p, r4p + h, r4p - h])
+        cost, q = self.evaluate(r1, r4)
+        f0 = cost[0]
+        fstar = float(f0.min())
+        if not math.isfinite(fstar):
+            return False
+        radius = fstar / self.w_min
+        if radius > _FAST_RADIUS:
+            return False
+        wr = self.w * REVOLUTE
+        for br in range(N_BRANCHES):
+            if not math.isfinite(f0[br]):
+                continue
+            # one-sided slopes where a stencil point is infeasible (that side is blocked)
+            fin = np.isfinite(cost[:, br])
+            slopes = np.abs(q[1:, br] - q[0, br]) @ wr / h
+            g = float(np.max(np.where(fin[1:], slopes, 0.0)))
+            if g <= _CERT_SAFETY * self.w_min:
+                continue
+            # a steeper branch is still safe if it cannot dip below fstar before the
+            # prismatic cost alone exceeds fstar
+            if g < self.w_min or (f0[br] - fstar) < (g - self.w_min) * radius:
+                return False
+        return bool(self.best_cost == fstar)
+
+    # -- the 2-D search ---------------------------------------------------------------------
+    def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.3,
+                   tol: float = 1e-9) -> None:
+        """Grid over the box that must hold the optimum, then zoom around the best cells."""
+        if not self.intervals:
+            return
+        r1p, r4p = float(self.prev[_TRACK]), float(self.prev[_EXTEND])
+        ball = self.ball()
+        r1s = self.r1_grid(r1p - ball, r1p + ball, n1)
+        if r1s.size == 0:
+            return
+        if any(a <= r1p <= b for a, b in self.intervals):
+            r1s = np.append(r1s, r1p)
+        seeds = self._grid(r1s, n4, r4p, ball)
+        span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
+        w1, wt = span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)
+        for _ in range(40):
+            if w1 <= tol and wt <= 1e-9:
+                break
+            seeds = seeds[:keep]
+            if not seeds:
+                return
+            cols: list[Array] = []
+            windows: list[tuple[float, float]] = []
+            for r1c, tc in seeds:
+                c = np.linspace(r1c - w1, r1c + w1, 7)
+                if r1c - w1 <= r1p <= r1c + w1:
+                    c = np.append(c, r1p)
+                cols.append(c)
+                windows.append((tc - wt, tc + wt))
+            seeds = self._grid_multi(cols, windows, 7, r4p, self.ball())
+            w1 *= zoom
+            wt *= zoom
+
+    def _grid(self, r1s: Array, n4: int, r4p: float, ball: float) -> list[tuple[float, float]]:
+        return self._grid_multi([r1s], [(0.0, 1.0)], n4, r4p, ball)
+
+    def _grid_multi(self, cols: list[Array], windows: list[tuple[float, float]], n4: int,
+                    r4p: float, ball: float) -> list[tuple[float, float]]:
+        """Evaluate track columns x normalised extend rows; return (r1, t) best first.
+
+        Each column's extend range is its closed-form reach interval clipped to the ball; the
+        rows spread over that window of it, plus the held extend and the interval ends.
+        """
+        r1_all, r4_all, t_all = [], [], []
+        for r1s, (t0, t1) in zip(cols, windows, strict=True):
+            r1s = r1s[(r1s >= self.region.r1_lo) & (r1s <= self.region.r1_hi)]
+            lo, hi = self.region.r4_interval(r1s)
+            lo = np.maximum(lo, r4p - ball)
+            hi = np.minimum(hi, r4p + ball)
+            sel = lo <= hi
+            r1s, lo, hi = r1s[sel], lo[sel], hi[sel]
+            if r1s.size == 0:
+                continue
+            ts = np.concatenate([np.linspace(max(t0, 0.0), min(t1, 1.0), n4), [0.0, 1.0]])
+            span = hi - lo
+            r4 = lo[:, None] + span[:, None] * ts[None, :]
+            held = np.minimum(np.maximum(r4p, lo), hi)
+            r4 = np.concatenate([r4, held[:, None]], axis=1)
+            safe_span = np.where(span > 0, span, 1.0)[:, None]
+            t = np.where(span[:, None] > 0, (r4 - lo[:, None]) / safe_span, 0.0)
+            r1_all.append(np.broadcast_to(r1s[:, None], r4.shape).ravel())
+            r4_all.append(r4.ravel())
+            t_all.append(t.ravel())
+        if not r1_all:
+            return []
+        r1 = np.concatenate(r1_all)
+        r4 = np.concatenate(r4_all)
+        t = np.concatenate(t_all)
+        cost, _ = self.evaluate(r1, r4)
+        best = cost.min(axis=1)
+        order = np.argsort(best)
+        out: list[tuple[float, float]] = []
+        seen: set[float] = set()
+        for k in order[:64]:
+            if not math.isfinite(best[k]) or r1[k] in seen:
+                continue
+            seen.add(float(r1[k]))
+            out.append((float(r1[k]), float(t[k])))
+        return out
+
+
+def _bounds_for(robot: Robot, objective: str, with_margins: bool, previous: Array,
+                max_step: Array | None) -> _Bounds:
+    if objective == "smooth" and with_margins:
+        m = robot.ik.limit_margin
+        lower, upper = robot.lower + m, robot.upper - m
+        stretch, wrist = robot.ik.stretch_margin, robot.ik.wrist_margin
+    else:
+        lower, upper = robot.lower.copy(), robot.upper.copy()
+        stretch, wrist = 0.0, 0.0
+    if max_step is not None:
+        # a step bound is a per-frame box around the previous solution; where the previous
+        # solution lies outside the (margin) limits the box is clamped, never inverted
+        lower = np.minimum(np.maximum(lower, previous - max_step), upper)
+        upper = np.maximum(np.minimum(upper, previous + max_step), lower)
+    return _Bounds(lower, upper, stretch, wrist)
+
+
+def _solve_one(robot: Robot, target: Array, previous: Array, bounds: _Bounds) -> _Problem:
+    prob = _Problem(robot, target, previous, bounds)
+    if prob.try_certificate() or prob.line_search():
+        return prob
+    prob.box_search()
+    return prob
+
+
+def solve_ik(
+    robot: Robot,
+    target: ArrayLike,
+    previous: ArrayLike | None = None,
+    *,
+    objective: str | None = None,
+    max_step: ArrayLike | None = None,
+) -> IKSolution:
+    """Solve one flange pose, minimising weighted motion from ``previous``.
+
+    Args:
+        robot: The robot (limits, weights, IK settings).
+        target: Flange pose in the base frame (``flange2base``), shape (4, 4) [m].
+        previous: Joint vector (8,) the move starts from; default the robot's home.
+        objective: ``"smooth"`` or ``"paper"``; default the robot file's ``[ik] objective``.
+        max_step: Optional per-axis bound on |q - previous| (8,) [m, rad], e.g. what each axis
+            can travel in one frame at its velocity limit. It keeps consecutive frames on one
+            branch; where no solution respects it, it is dropped (and reported).
+
+    Returns:
+        The solution. With the smooth objective, margins and step bound are relaxed in this
+        order when a pose needs it: step bound kept with hard limits, then margins without the
+        step bound, then neither; ``within_margins`` / ``within_step`` tell which held.
+
+    Raises:
+        UnreachableError: No solution inside the joint limits; says by how much it misses.
+    """
+    T = _check_target(target)
+    prev = robot.home.copy() if previous is None else np.asarray(previous, dtype=float).copy()
+    if prev.shape != (8,) or not np.all(np.isfinite(prev)):
+        msg = f"previous must be 8 finite joint values, got {prev!r}"
+        raise ValueError(msg)
+    obj = objective or robot.ik.objective
+    if obj not in ("smooth", "paper"):
+        msg = f"objective must be 'smooth' or 'paper', got {obj!r}"
+        raise ValueError(msg)
+    step = None if max_step is None else np.asarray(max_step, dtype=float)
+    margins = [True, False] if obj == "smooth" else [False]
+    steps = [True, False] if step is not None else [False]
+    for use_step in steps:
+        for use_margin in margins:
+            bounds = _bounds_for(robot, obj, use_margin, prev, step if use_step else None)
+            prob = _solve_one(robot, T, prev, bounds)
+            if prob.best_q is not None:
+                return IKSolution(prob.best_q, prob.best_cost, prob.best_branch,
+                                  within_margins=use_margin or obj == "paper",
+                                  within_step=use_step or step is None)
+    raise _diagnose(robot, T, prev)
+
+
+def solve_path(
+    robot: Robot,
+    targets: ArrayLike,
+    start: ArrayLike | None = None,
+    *,
+    objective: str | None = None,
+    frame_interval: float | None = None,
+    frame_numbers: ArrayLike | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> Array:
+    """Solve a whole shot, each frame seeded from the previous frame's solution.
+
+    Args:
+        robot: The robot.
+        targets: Flange poses in the base frame, shape (n, 4, 4) [m].
+        start: Joint vector (8,) before the first frame; default the robot's home.
+        objective: ``"smooth"`` or ``"paper"``; default the robot file's setting.
+        frame_interval: Seconds between frames. With the smooth objective it bounds each
+            axis's step between consecutive frames by its velocity limit times this interval
+            (no branch flips); ignored by the paper objective.
+        frame_numbers: Film frame numbers (n,) used in error messages; default 0..n-1.
+        progress: Called with the number of frames just finished (for a progress bar).
+
+    Returns:
+        Joint path, shape (n, 8) [m, rad].
+
+    Raises:
+        UnreachableFramesError: One or more frames have no solution; lists every such frame
+            and by how much it misses (later frames continue from the last good solution).
+    """
+    return solve_path_report(robot, targets, start, objective=objective,
+                             frame_interval=frame_interval, frame_numbers=frame_numbers,
+                             progress=progress).q
+
+
+@dataclass(frozen=True)
+class PathSolution:
+    """A solved shot: joint path and per-frame flags.
+
+    Attributes:
+        q: Joint path (n, 8) [m, rad].
+        cost: F of each frame against the frame before (n,).
+        within_margins: (n,) False where the smooth margins had to be relaxed.
+        within_step: (n,) False where the per-frame step bound had to be dropped.
+    """
+
+    q: Array
+    cost: Array
+    within_margins: NDArray[np.bool_]
+    within_step: NDArray[np.bool_]
+
+
+def solve_path_report(
+    robot: Robot,
+    targets: ArrayLike,
+    start: ArrayLike | None = None,
+    *,
+    objective: str | None = None,
+    frame_interval: float | None = None,
+    frame_numbers: ArrayLike | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> PathSolution:
+    """:func:`solve_path` with per-frame costs and relaxation flags."""
+    Ts = np.asarray(targets, dtype=float)
+    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4):
+        msg = f"targets must have shape (n, 4, 4), got {Ts.shape}"
+        raise ValueError(msg)
+    n = Ts.shape[0]
+    frames = np.arange(n) if frame_numbers is None else np.asarray(frame_numbers)
+    prev = robot.home.copy() if start is None else np.asarray(start, dtype=float).copy()
+    obj = objective or robot.ik.objective
+    step = None
+    if frame_interval is not None and obj == "smooth":
+        step = robot.max_velocity * float(frame_interval)
+    out = np.empty((n, 8))
+    cost = np.zeros(n)
+    margins = np.ones(n, dtype=bool)
+    steps = np.ones(n, dtype=bool)
+    errors: list[UnreachableError] = []
+    for i in range(n):
+        try:
+            # the first frame is reached by the run-up, not within one frame interval
+            sol = solve_ik(robot, Ts[i], prev, objective=obj,
+                           max_step=step if i > 0 and not errors else None)
+        except UnreachableError as exc:
+            errors.append(exc.at_frame(int(frames[i])))
+            out[i] = np.nan
+        else:
+            out[i], cost[i] = sol.q, sol.cost
+            margins[i], steps[i] = sol.within_margins, sol.within_step
+            prev = sol.q
+        if progress is not None:
+            progress(1)
+    if errors:
+        raise UnreachableFramesError(errors)
+    return PathSolution(out, cost, margins, steps)
+
+
+def motion_cost(robot: Robot, q: ArrayLike, previous: ArrayLike) -> Array:
+    """F = sum(w * |q - previous|) for joint vectors q (..., 8)."""
+    return np.asarray(np.abs(np.asarray(q) - np.asarray(previous)) @ robot.weights)
+
+
+def _check_target(target: ArrayLike) -> Array:
+    T = np.asarray(target, dtype=float)
+    if T.shape != (4, 4):
+        msg = f"target must be a 4x4 pose, got shape {T.shape}"
+        raise ValueError(msg)
+    if not np.all(np.isfinite(T)):
+        raise UnreachableError("the target pose contains NaN or infinity", miss=math.inf)
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        msg = "target rotation is not a proper rotation matrix (scaled, sheared or mirrored)"
+        raise ValueError(msg)
+    return T
+
+
+def _diagnose(robot: Robot, T: Array, prev: Array) -> UnreachableError:
+    """Say why a pose has no solution and by how much it misses."""
+    bounds = _bounds_for(robot, "paper", False, prev, None)
+    prob = _Problem(robot, T, prev, bounds)
+    intervals, miss = prob.intervals, prob.miss
+    W = T[:3, 3]
+    where = f"camera at ({W[0]:.3f}, {W[1]:.3f}, {W[2]:.3f}) m"
+    if not intervals:
+        return UnreachableError(
+            f"{where} is out of reach by {miss:.3f} m (arm fully extended, track "
+            f"[{robot.lower[_TRACK]:.2f}, {robot.upper[_TRACK]:.2f}] m)",
+            miss=miss,
+        )
+    # position reachable: find the candidate whose worst limit overrun is smallest
+    free = _Bounds(np.full(8, -np.inf), np.full(8, np.inf), 0.0)
+    best: tuple[float, int] | None = None
+    for a, b in intervals:
+        r1s = np.linspace(a, b, 61)
+        lo, hi = prob.region.r4_interval(r1s)
+        sel = lo <= hi
+        if not np.any(sel):
+            continue
+        t = np.linspace(0, 1, 21)
+        r4 = (lo[sel, None] + (hi[sel] - lo[sel])[:, None] * t).ravel()
+        r1 = np.repeat(r1s[sel], t.size)
+        q_free, ok_free = six_axis_solutions(robot.dh, T, r1, r4, prev, free.lower, free.upper)
+        over = np.maximum(q_free - robot.upper, 0) + np.maximum(robot.lower - q_free, 0)
+        over = np.where(ok_free[..., None], over, np.inf)
+        worst = over.max(axis=-1)
+        k = int(np.argmin(worst))
+        i, br = divmod(k, N_BRANCHES)
+        cand = (float(worst.flat[k]), int(np.argmax(over[i, br])))
+        if best is None or cand[0] < best[0]:
+            best = cand
+    if best is None or not math.isfinite(best[0]):
+        return UnreachableError(f"{where}: no arm configuration reaches it", miss=math.inf)
+    amount, axis = best
+    name = JOINT_NAMES[axis]
+    if PRISMATIC[axis]:
+        return UnreachableError(
+            f"{where} needs {name} {amount:.3f} m beyond its limit", miss=amount, axis=name
+        )
+    return UnreachableError(
+        f"{where} needs {name} {math.degrees(amount):.1f} deg beyond its limit",
+        miss=amount, miss_unit="rad", axis=name,
+    )

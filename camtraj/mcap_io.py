@@ -1,0 +1,1164 @@
+"""Write a solved take as a ROS 2 MCAP file and read it back (design.md §4).
+
+The file follows the MCAP ``ros2`` profile: CDR-encoded messages, schemas embedded as ``ros2msg``
+with their full concatenated definitions, zstd-compressed chunks. Log time = publish time = the
+take time in nanoseconds (the take starts at t = 0), so the same inputs give the same bytes.
+
+Topics:
+    /joint_states       sensor_msgs/msg/JointState        every servo sample
+    /joint_trajectory   trajectory_msgs/msg/JointTrajectory  once at t = 0, every servo sample
+    /shot/frames        camtraj_msgs/msg/ShotFrame        one per film frame, at its take time
+    /robot_description  std_msgs/msg/String               once at t = 0 (URDF)
+    /tf                 tf2_msgs/msg/TFMessage            at the film frame rate (moving joints)
+    /tf_static          tf2_msgs/msg/TFMessage            once at t = 0 (fixed transforms)
+Metadata records: ``camtraj`` (the caller's key/values) and ``camtraj.robot`` (the robot's
+joint names and limits as JSON, for ``camtraj info``).
+
+Messages are encoded here, not with mcap_ros2's pure-Python encoder (too slow for a minute of
+250 Hz samples); ``read_take`` decodes with mcap_ros2, the path third-party readers use, and the
+tests check the bytes against mcap_ros2's encoder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import re
+import struct
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_ros2.decoder import DecoderFactory
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.errors import CamtrajError, InputError
+from camtraj.robot import Robot
+from camtraj.urdf import link_transforms, robot_urdf, static_transforms
+
+Array = NDArray[np.float64]
+
+PROFILE = "ros2"
+METADATA_NAME = "camtraj"
+ROBOT_METADATA_NAME = "camtraj.robot"
+
+TOPIC_JOINT_STATES = "/joint_states"
+TOPIC_TRAJECTORY = "/joint_trajectory"
+TOPIC_FRAMES = "/shot/frames"
+TOPIC_DESCRIPTION = "/robot_description"
+TOPIC_TF = "/tf"
+TOPIC_TF_STATIC = "/tf_static"
+
+#: topic -> schema name, in the order channels are registered (and same-time messages written).
+TOPICS: dict[str, str] = {
+    TOPIC_DESCRIPTION: "std_msgs/msg/String",
+    TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
+    TOPIC_TRAJECTORY: "trajectory_msgs/msg/JointTrajectory",
+    TOPIC_JOINT_STATES: "sensor_msgs/msg/JointState",
+    TOPIC_TF: "tf2_msgs/msg/TFMessage",
+    TOPIC_FRAMES: "camtraj_msgs/msg/ShotFrame",
+}
+
+_CHUNK_SIZE = 1024 * 1024
+_NS = 1_000_000_000
+
+# ---------------------------------------------------------------------------------------------
+# Message definitions (.msg text, keyed by the short "pkg/Type" name used in field types)
+# ---------------------------------------------------------------------------------------------
+
+_MSG_DEFS: dict[str, str] = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec",
+    "builtin_interfaces/Duration": "int32 sec\nuint32 nanosec",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+    "std_msgs/String": "string data",
+    "sensor_msgs/JointState": (
+        "std_msgs/Header header\n"
+        "string[] name\n"
+        "float64[] position\n"
+        "float64[] velocity\n"
+        "float64[] effort"
+    ),
+    "trajectory_msgs/JointTrajectory": (
+        "std_msgs/Header header\n"
+        "string[] joint_names\n"
+        "JointTrajectoryPoint[] points"
+    ),
+    "trajectory_msgs/JointTrajectoryPoint": (
+        "float64[] positions\n"
+        "float64[] velocities\n"
+        "float64[] accelerations\n"
+        "float64[] effort\n"
+        "builtin_interfaces/Duration time_from_start"
+    ),
+    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms",
+    "geometry_msgs/TransformStamped": (
+        "std_msgs/Header header\n"
+        "string child_frame_id\n"
+        "Transform transform"
+    ),
+    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z",
+    "camtraj_msgs/ShotFrame": (
+        "# One solved film frame of a camtraj take (camtraj, design.md section 4).\n"
+        "# Poses are CAMERA poses (USD convention: the camera looks down its -Z, +Y up)\n"
+        "# in the robot base frame (base_link): x along the track, z up, metres.\n"
+        "int32 frame                   # film frame number from the USD time code\n"
+        "float64 time                  # seconds from the start of the take\n"
+        "string[] name                 # joint names, order of /joint_states\n"
+        "float64[] position            # the IK solution for this frame [m, rad]\n"
+        "geometry_msgs/Pose target     # requested camera pose, robot base frame\n"
+        "geometry_msgs/Pose achieved   # FK of the solution (camera pose), robot base frame\n"
+        "float64 focal_length_mm       # lens focal length [mm]\n"
+        "float64 focus_distance_m      # focus distance from the camera [m]\n"
+        "float64 f_stop                # aperture as an f-number (dimensionless)"
+    ),
+}
+
+_PRIMITIVES = frozenset(
+    (
+        "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+        "int32", "uint32", "int64", "uint64", "string", "wstring",
+    )
+)
+_DELIMITER = "=" * 80
+
+
+def _msg_dependencies(short_name: str) -> list[str]:
+    """Non-primitive field types of a definition, as full "pkg/Type" names, sorted."""
+    package = short_name.split("/")[0]
+    deps: set[str] = set()
+    for line in _MSG_DEFS[short_name].splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        ftype = re.sub(r"\[[^\]]*\]$", "", line.split()[0])
+        if ftype in _PRIMITIVES:
+            continue
+        deps.add(ftype if "/" in ftype else f"{package}/{ftype}")
+    return sorted(deps)
+
+
+def message_definition(schema_name: str) -> str:
+    """The complete ``ros2msg`` definition of a type, dependencies included.
+
+    Concatenated the way rosbag2 does it: the top-level definition first, then each
+    dependency (depth first, once) after a line of 80 ``=`` and a ``MSG: pkg/Type`` line.
+
+    Args:
+        schema_name: A type name such as ``"sensor_msgs/msg/JointState"``.
+    """
+    parts = schema_name.split("/")
+    root = f"{parts[0]}/{parts[-1]}"
+    if root not in _MSG_DEFS:
+        msg = f"no message definition for {schema_name}; known: {', '.join(sorted(_MSG_DEFS))}"
+        raise ValueError(msg)
+    seen: set[str] = set()
+
+    def expand(name: str) -> str:
+        text = _MSG_DEFS[name]
+        for dep in _msg_dependencies(name):
+            if dep not in seen:
+                seen.add(dep)
+                text += f"\n{_DELIMITER}\nMSG: {dep}\n" + expand(dep)
+        return text
+
+    return expand(root) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# CDR encoding (little-endian XCDR1, as ROS 2 writes it)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Slot:
+    dtype: str
+    count: int
+    offsets: list[int]
+
+
+class _Cdr:
+    """Builds one CDR message, or a template whose numeric "slots" are filled in bulk.
+
+    Alignment is counted from the end of the 4-byte encapsulation header (``phase`` shifts
+    the origin for fragments that start mid-message).
+    """
+
+    def __init__(self, *, header: bool = True, phase: int = 0) -> None:
+        self.buf = bytearray(b"\x00\x01\x00\x00" if header else b"")
+        self._origin = (4 if header else 0) - phase
+        self.slots: dict[str, _Slot] = {}
+
+    @property
+    def position(self) -> int:
+        """Current offset from the alignment origin."""
+        return len(self.buf) - self._origin
+
+    def _align(self, size: int) -> None:
+        pad = -self.position % size
+        if pad:
+            self.buf += bytes(pad)
+
+    def u32(self, value: int) -> None:
+        self._align(4)
+        self.buf += struct.pack("<I", value)
+
+    def i32(self, value: int) -> None:
+        self._align(4)
+        self.buf += struct.pack("<i", value)
+
+    def time(self, ns: int) -> None:
+        sec, nanosec = divmod(int(ns), _NS)
+        self.i32(sec)
+        self.u32(nanosec)
+
+    def string(self, value: str) -> None:
+        data = value.encode("utf-8")
+        self.u32(len(data) + 1)
+        self.buf += data + b"\x00"
+
+    def strings(self, values: Sequence[str]) -> None:
+        self.u32(len(values))
+        for value in values:
+            self.string(value)
+
+    def f64s(self, values: ArrayLike) -> None:
+        """A float64[] sequence: length, then the values."""
+        arr = np.asarray(values, dtype="<f8").ravel()
+        self.u32(arr.size)
+        if arr.size:
+            self._align(8)
+            self.buf += arr.tobytes()
+
+    def slot(self, key: str, dtype: str, count: int = 1) -> None:
+        """Reserve ``count`` values of ``dtype`` (e.g. ``"<f8"``) to be filled per message."""
+        size = np.dtype(dtype).itemsize
+        self._align(size)
+        entry = self.slots.setdefault(key, _Slot(dtype, count, []))
+        if entry.dtype != dtype or entry.count != count:
+            msg = f"slot {key} reused with another type"
+            raise ValueError(msg)
+        entry.offsets.append(len(self.buf))
+        self.buf += bytes(size * count)
+
+    def slot_time(self, key: str) -> None:
+        self.slot(f"{key}.sec", "<i4")
+        self.slot(f"{key}.nanosec", "<u4")
+
+    def slot_f64s(self, key: str, count: int) -> None:
+        """A float64[] sequence of fixed length ``count`` whose values are a slot."""
+        self.u32(count)
+        if count:
+            self.slot(key, "<f8", count)
+
+    def fill(self, values: Mapping[str, ArrayLike], n: int) -> NDArray[np.uint8]:
+        """``n`` copies of the template with the slots filled, shape (n, len(template)).
+
+        ``values[key]`` has shape (n,) or (n, count) for each slot key.
+        """
+        out = np.empty((n, len(self.buf)), dtype=np.uint8)
+        out[:] = np.frombuffer(bytes(self.buf), dtype=np.uint8)
+        for key, slot in self.slots.items():
+            vals = np.asarray(values[key])
+            if vals.shape[0] != n or vals.size != n * slot.count:
+                msg = f"slot {key}: expected {n} x {slot.count} values, got shape {vals.shape}"
+                raise ValueError(msg)
+            raw = np.ascontiguousarray(vals.astype(slot.dtype).reshape(n, slot.count))
+            raw_bytes = raw.view(np.uint8).reshape(n, -1)
+            width = raw_bytes.shape[1]
+            for off in slot.offsets:
+                out[:, off : off + width] = raw_bytes
+        return out
+
+
+def _split_rows(rows: NDArray[np.uint8]) -> list[bytes]:
+    data = rows.tobytes()
+    width = rows.shape[1]
+    return [data[i : i + width] for i in range(0, len(data), width)]
+
+
+def _stamp_values(key: str, ns: NDArray[np.int64]) -> dict[str, NDArray[np.int64]]:
+    sec, nanosec = np.divmod(ns, _NS)
+    return {f"{key}.sec": sec, f"{key}.nanosec": nanosec}
+
+
+def _encode_joint_states(
+    names: Sequence[str], ns: NDArray[np.int64], q: Array, qd: Array
+) -> list[bytes]:
+    tpl = _Cdr()
+    tpl.slot_time("stamp")
+    tpl.string("")
+    tpl.strings(names)
+    tpl.slot_f64s("position", len(names))
+    tpl.slot_f64s("velocity", len(names))
+    tpl.u32(0)  # effort: empty
+    values: dict[str, ArrayLike] = {**_stamp_values("stamp", ns), "position": q, "velocity": qd}
+    return _split_rows(tpl.fill(values, len(ns)))
+
+
+def _encode_trajectory(
+    names: Sequence[str], ns: NDArray[np.int64], q: Array, qd: Array, qdd: Array
+) -> bytes:
+    head = _Cdr()
+    head.time(0)
+    head.string("")
+    head.strings(names)
+    head.u32(len(ns))
+    # A point's layout depends only on where it starts modulo 8: one template per phase.
+    templates: dict[int, _Cdr] = {}
+    starts = np.empty(len(ns), dtype=np.int64)
+    phases = np.empty(len(ns), dtype=np.int64)
+    pos = head.position
+    for i in range(len(ns)):
+        phase = pos % 8
+        tpl = templates.get(phase)
+        if tpl is None:
+            tpl = _Cdr(header=False, phase=phase)
+            tpl.slot_f64s("positions", len(names))
+            tpl.slot_f64s("velocities", len(names))
+            tpl.slot_f64s("accelerations", len(names))
+            tpl.u32(0)  # effort: empty
+            tpl.slot_time("time_from_start")
+            templates[phase] = tpl
+        starts[i] = pos
+        phases[i] = phase
+        pos += len(tpl.buf)
+    body = np.empty(pos - head.position, dtype=np.uint8)
+    sec, nanosec = np.divmod(ns, _NS)
+    for phase, tpl in templates.items():
+        idx = np.flatnonzero(phases == phase)
+        rows = tpl.fill(
+            {
+                "positions": q[idx],
+                "velocities": qd[idx],
+                "accelerations": qdd[idx],
+                "time_from_start.sec": sec[idx],
+                "time_from_start.nanosec": nanosec[idx],
+            },
+            len(idx),
+        )
+        where = (starts[idx] - head.position)[:, None] + np.arange(rows.shape[1])
+        body[where] = rows
+    return bytes(head.buf) + body.tobytes()
+
+
+def _encode_tf(
+    frames: Sequence[tuple[str, str]], ns: NDArray[np.int64], poses: Sequence[Array]
+) -> list[bytes]:
+    """TFMessages with one TransformStamped per (parent, child); poses[i] has shape (k, 7)."""
+    tpl = _Cdr()
+    tpl.u32(len(frames))
+    for i, (parent, child) in enumerate(frames):
+        tpl.slot_time("stamp")
+        tpl.string(parent)
+        tpl.string(child)
+        tpl.slot(f"tf{i}", "<f8", 7)
+    values: dict[str, ArrayLike] = dict(_stamp_values("stamp", ns))
+    for i, pose in enumerate(poses):
+        values[f"tf{i}"] = pose
+    return _split_rows(tpl.fill(values, len(ns)))
+
+
+def _encode_shot_frames(take: TakeData) -> list[bytes]:
+    tpl = _Cdr()
+    tpl.slot("frame", "<i4")
+    tpl.slot("time", "<f8")
+    tpl.strings(take.joint_names)
+    tpl.slot_f64s("position", len(take.joint_names))
+    tpl.slot("target", "<f8", 7)
+    tpl.slot("achieved", "<f8", 7)
+    tpl.slot("lens", "<f8", 3)
+    lens = np.stack([take.focal_length_mm, take.focus_distance_m, take.f_stop], axis=-1)
+    values: dict[str, ArrayLike] = {
+        "frame": take.frame_numbers,
+        "time": take.frame_times,
+        "position": take.frame_q,
+        "target": pose7_from_matrix(take.target),
+        "achieved": pose7_from_matrix(take.achieved),
+        "lens": lens,
+    }
+    return _split_rows(tpl.fill(values, len(take.frame_times)))
+
+
+def _encode_string(text: str) -> bytes:
+    msg = _Cdr()
+    msg.string(text)
+    return bytes(msg.buf)
+
+
+# ---------------------------------------------------------------------------------------------
+# Rotations
+# ---------------------------------------------------------------------------------------------
+
+
+def quat_from_matrix(R: ArrayLike) -> Array:
+    """Unit quaternions ``(x, y, z, w)`` of rotation matrices (Shepperd's method).
+
+    Picks the best-conditioned of the four formulas (largest of the trace and the diagonal),
+    normalises, and makes ``w >= 0`` (for ``w == 0`` the first non-zero of x, y, z positive).
+
+    Args:
+        R: Rotations, shape (..., 3, 3), or transforms (..., 4, 4) (rotation part used).
+
+    Returns:
+        Quaternions, shape (..., 4), scalar last (ROS order).
+    """
+    M = np.asarray(R, dtype=float)[..., :3, :3]
+    m00, m01, m02 = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
+    m10, m11, m12 = M[..., 1, 0], M[..., 1, 1], M[..., 1, 2]
+    m20, m21, m22 = M[..., 2, 0], M[..., 2, 1], M[..., 2, 2]
+    trace = m00 + m11 + m22
+    choice = np.argmax(np.stack([trace, m00, m11, m22], axis=-1), axis=-1)
+    # 4 * (the component picked) squared, for each choice; at least 1 where picked.
+    big = np.stack(
+        [1.0 + trace, 1.0 + m00 - m11 - m22, 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22],
+        axis=-1,
+    )
+    s = np.sqrt(np.maximum(np.take_along_axis(big, choice[..., None], axis=-1)[..., 0], 1e-300))
+    # Unnormalised candidates (scaled by 4 * component), one row per choice: (x, y, z, w).
+    cands = np.stack(
+        [
+            np.stack([m21 - m12, m02 - m20, m10 - m01, big[..., 0]], axis=-1),
+            np.stack([big[..., 1], m01 + m10, m02 + m20, m21 - m12], axis=-1),
+            np.stack([m01 + m10, big[..., 2], m12 + m21, m02 - m20], axis=-1),
+            np.stack([m02 + m20, m12 + m21, big[..., 3], m10 - m01], axis=-1),
+        ],
+        axis=-2,
+    )
+    quat = np.take_along_axis(cands, choice[..., None, None], axis=-2)[..., 0, :] / (2.0 * s)[
+        ..., None
+    ]
+    quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
+    w = quat[..., 3]
+    flip = w < 0
+    zero_w = w == 0
+    if np.any(zero_w):
+        xyz = quat[..., :3]
+        first = np.take_along_axis(xyz, np.argmax(xyz != 0, axis=-1)[..., None], axis=-1)[..., 0]
+        flip = flip | (zero_w & (first < 0))
+    out: Array = np.where(flip[..., None], -quat, quat) + 0.0  # + 0.0: no negative zeros
+    return out
+
+
+def matrix_from_quat(quat: ArrayLike) -> Array:
+    """Rotation matrices of quaternions ``(x, y, z, w)`` (normalised first), shape (..., 3, 3)."""
+    qa = np.asarray(quat, dtype=float)
+    qa = qa / np.linalg.norm(qa, axis=-1, keepdims=True)
+    x, y, z, w = qa[..., 0], qa[..., 1], qa[..., 2], qa[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
+
+
+def pose7_from_matrix(T: ArrayLike) -> Array:
+    """``(x, y, z, qx, qy, qz, qw)`` of transforms (..., 4, 4): the Pose / Transform layout."""
+    Ta = np.asarray(T, dtype=float)
+    return np.concatenate([Ta[..., :3, 3], quat_from_matrix(Ta)], axis=-1)
+
+
+def matrix_from_pose7(pose: ArrayLike) -> Array:
+    """Transforms (..., 4, 4) from ``(x, y, z, qx, qy, qz, qw)``."""
+    pa = np.asarray(pose, dtype=float)
+    out = np.zeros((*pa.shape[:-1], 4, 4))
+    out[..., :3, :3] = matrix_from_quat(pa[..., 3:])
+    out[..., :3, 3] = pa[..., :3]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The take
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)  # arrays: compare fields, not objects
+class TakeData:
+    """Everything the writer needs, as plain arrays in SI units.
+
+    Attributes:
+        joint_names: Joint names in design order, length 8.
+        t: Servo sample times [s] from the start of the take, shape (m,), increasing, >= 0.
+        q: Joint positions [m, rad] per servo sample, shape (m, 8).
+        qd: Joint velocities [m/s, rad/s], shape (m, 8).
+        qdd: Joint accelerations [m/s², rad/s²], shape (m, 8).
+        frame_numbers: Film frame numbers (USD time codes), shape (n,), integers.
+        frame_times: Take time of each film frame [s], shape (n,), non-decreasing.
+        frame_q: The IK solution per frame [m, rad], shape (n, 8).
+        target: Requested camera poses ``camera2base``, shape (n, 4, 4) [m].
+        achieved: Camera poses of the solutions (FK), shape (n, 4, 4) [m].
+        focal_length_mm: Focal length per frame [mm], shape (n,).
+        focus_distance_m: Focus distance per frame [m], shape (n,).
+        f_stop: Aperture per frame (f-number), shape (n,).
+        fps: Film frame rate [1/s], the /tf sampling rate.
+    """
+
+    joint_names: tuple[str, ...]
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+    frame_numbers: NDArray[np.int64]
+    frame_times: Array
+    frame_q: Array
+    target: Array
+    achieved: Array
+    focal_length_mm: Array
+    focus_distance_m: Array
+    f_stop: Array
+    fps: float
+
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.joint_names)
+        object.__setattr__(self, "joint_names", names)
+        j = len(names)
+        t = self._array("t", self.t, None)
+        m = t.shape[0] if t.ndim == 1 else -1
+        if t.ndim != 1 or m < 1:
+            msg = f"TakeData.t must have shape (m,) with m >= 1, got {t.shape}"
+            raise ValueError(msg)
+        if t[0] < 0 or np.any(np.diff(t) <= 0):
+            msg = "TakeData.t must start at or after 0 and increase strictly"
+            raise ValueError(msg)
+        for name in ("q", "qd", "qdd"):
+            self._array(name, getattr(self, name), (m, j))
+        frames = np.asarray(self.frame_numbers)
+        n = frames.shape[0] if frames.ndim == 1 else -1
+        if frames.ndim != 1:
+            msg = f"TakeData.frame_numbers must have shape (n,), got {frames.shape}"
+            raise ValueError(msg)
+        frames_f = frames.astype(float)
+        if np.any(frames_f != np.round(frames_f)) or np.any(np.abs(frames_f) > 2**31 - 1):
+            msg = "TakeData.frame_numbers must be integers that fit in int32"
+            raise ValueError(msg)
+        object.__setattr__(self, "frame_numbers", frames.astype(np.int64))
+        ft = self._array("frame_times", self.frame_times, (n,))
+        if np.any(np.diff(ft) < 0) or (n and (ft[0] < 0 or ft[-1] > t[-1] + 1e-9)):
+            msg = "TakeData.frame_times must be non-decreasing and inside the take"
+            raise ValueError(msg)
+        self._array("frame_q", self.frame_q, (n, j))
+        self._array("target", self.target, (n, 4, 4))
+        self._array("achieved", self.achieved, (n, 4, 4))
+        for name in ("focal_length_mm", "focus_distance_m", "f_stop"):
+            self._array(name, getattr(self, name), (n,))
+        fps = float(self.fps)
+        if not (math.isfinite(fps) and fps > 0):
+            msg = f"TakeData.fps must be a positive frame rate, got {self.fps!r}"
+            raise ValueError(msg)
+        object.__setattr__(self, "fps", fps)
+
+    def _array(self, name: str, value: ArrayLike, shape: tuple[int, ...] | None) -> Array:
+        arr = np.asarray(value, dtype=float)
+        if shape is not None and arr.shape != shape:
+            msg = f"TakeData.{name} must have shape {shape}, got {arr.shape}"
+            raise ValueError(msg)
+        if not np.all(np.isfinite(arr)):
+            msg = f"TakeData.{name} has non-finite values"
+            raise ValueError(msg)
+        object.__setattr__(self, name, arr)
+        return arr
+
+
+def seconds_to_ns(t: ArrayLike) -> NDArray[np.int64]:
+    """Take times [s] to integer nanoseconds (rounded), the MCAP log times."""
+    return np.asarray(np.round(np.asarray(t, dtype=float) * _NS), dtype=np.int64)
+
+
+def interpolate_servo(t: Array, q: Array, qd: Array, times: ArrayLike) -> Array:
+    """Joint positions at ``times`` by cubic Hermite interpolation of the servo stream.
+
+    Exact at the servo samples; times outside ``[t[0], t[-1]]`` are clamped.
+
+    Args:
+        t: Servo sample times [s], shape (m,), increasing.
+        q: Positions, shape (m, j). qd: Velocities, shape (m, j).
+        times: Query times [s], shape (k,).
+
+    Returns:
+        Positions, shape (k, j).
+    """
+    tq = np.clip(np.asarray(times, dtype=float), t[0], t[-1])
+    if len(t) == 1:
+        return np.repeat(q[:1], len(tq), axis=0)
+    i = np.clip(np.searchsorted(t, tq, side="right") - 1, 0, len(t) - 2)
+    h = (t[i + 1] - t[i])[:, None]
+    s = ((tq - t[i])[:, None]) / h
+    s2, s3 = s * s, s * s * s
+    h00 = 2 * s3 - 3 * s2 + 1
+    h10 = s3 - 2 * s2 + s
+    h01 = -2 * s3 + 3 * s2
+    h11 = s3 - s2
+    out: Array = h00 * q[i] + h10 * h * qd[i] + h01 * q[i + 1] + h11 * h * qd[i + 1]
+    return out
+
+
+def tf_times(take: TakeData) -> Array:
+    """The /tf sample times [s]: the film frame rate across the whole take.
+
+    The grid is anchored at the first shot frame (so every film frame of a shot timed at
+    the frame rate gets its own /tf sample) and runs from the take's first to last sample.
+    """
+    start, end = float(take.t[0]), float(take.t[-1])
+    anchor = float(take.frame_times[0]) if len(take.frame_times) else start
+    k_lo = -math.floor((anchor - start) * take.fps + 1e-9)
+    k_hi = math.floor((end - anchor) * take.fps + 1e-9)
+    times = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
+    out: Array = np.clip(times, start, end)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+# ---------------------------------------------------------------------------------------------
+
+
+def _library_identifier() -> str:
+    try:
+        version = importlib_metadata.version("camtraj")
+    except importlib_metadata.PackageNotFoundError:
+        version = "unknown"
+    return f"camtraj/{version}"
+
+
+def _robot_metadata(robot: Robot) -> dict[str, str]:
+    desc = robot.describe()
+    return {key: json.dumps(value) for key, value in desc.items()}
+
+
+def _reason(exc: OSError) -> str:
+    text = exc.strerror or str(exc)
+    return text[:1].lower() + text[1:]
+
+
+def _open_temp(path: Path) -> IO[bytes]:
+    """Open the temporary output file (a seam for tests)."""
+    return path.open("wb")
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_take(
+    path: str | Path, take: TakeData, robot: Robot, metadata: Mapping[str, str]
+) -> None:
+    """Write a take as a ROS 2 MCAP file, atomically.
+
+    The file is written to ``.<name>.tmp-<pid>`` in the destination folder, flushed and
+    fsynced, then renamed over ``path``; on any error the temporary file is removed and an
+    existing file at ``path`` is left as it was.
+
+    Args:
+        path: Destination ``.mcap`` file.
+        take: The solved, timed take.
+        robot: The robot it was solved for (URDF, transforms, limits metadata).
+        metadata: The ``camtraj`` metadata record: string keys and values (e.g. source_file,
+            camera_prim, frame_range, fps, robot, placement, mount, timing_mode,
+            speed_factor, tool_version).
+
+    Raises:
+        InputError: The destination folder does not exist or cannot be written.
+        ValueError: The take does not match the robot (joint names).
+    """
+    path = Path(path)
+    if tuple(take.joint_names) != tuple(robot.joint_names):
+        msg = (
+            f"take joint names {list(take.joint_names)} differ from the robot's "
+            f"{list(robot.joint_names)}"
+        )
+        raise ValueError(msg)
+    for key, value in metadata.items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            msg = f"metadata must map strings to strings; got {key!r}: {value!r}"
+            raise TypeError(msg)
+    folder = path.parent
+    if not folder.is_dir():
+        what = "is not a folder" if folder.exists() else "does not exist"
+        msg = f"cannot write {path}: folder {folder} {what}"
+        raise InputError(msg)
+    if path.is_dir():
+        msg = f"cannot write {path}: it is a folder"
+        raise InputError(msg)
+
+    records = _build_records(take, robot)
+    tmp = folder / f".{path.name}.tmp-{os.getpid()}"
+    try:
+        try:
+            stream = _open_temp(tmp)
+        except OSError as exc:
+            msg = f"cannot write {path}: {_reason(exc)}"
+            raise InputError(msg) from exc
+        with stream:
+            _write_mcap(stream, records, dict(metadata), _robot_metadata(robot))
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove_quietly(tmp)
+        msg = f"cannot write {path}: {_reason(exc)}"
+        raise InputError(msg) from exc
+    except BaseException:
+        _remove_quietly(tmp)
+        raise
+    _fsync_dir(folder)
+
+
+def _remove_quietly(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.unlink()
+
+
+@dataclass(frozen=True)
+class _Records:
+    """Encoded messages per topic: (log time [ns], CDR bytes) lists, in topic order."""
+
+    messages: dict[str, list[tuple[int, bytes]]]
+
+
+def _build_records(take: TakeData, robot: Robot) -> _Records:
+    names = take.joint_names
+    ns = seconds_to_ns(take.t)
+    messages: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in TOPICS}
+
+    messages[TOPIC_DESCRIPTION].append((0, _encode_string(robot_urdf(robot))))
+
+    statics = static_transforms(robot)
+    messages[TOPIC_TF_STATIC] = list(
+        zip(
+            [0],
+            _encode_tf(
+                [(s.parent, s.child) for s in statics],
+                np.zeros(1, dtype=np.int64),
+                [pose7_from_matrix(s.child2parent)[None, :] for s in statics],
+            ),
+            strict=True,
+        )
+    )
+
+    messages[TOPIC_TRAJECTORY].append(
+        (0, _encode_trajectory(names, ns, take.q, take.qd, take.qdd))
+    )
+    messages[TOPIC_JOINT_STATES] = list(
+        zip(ns.tolist(), _encode_joint_states(names, ns, take.q, take.qd), strict=True)
+    )
+
+    times = tf_times(take)
+    tf_ns = seconds_to_ns(times)
+    moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd, times))
+    messages[TOPIC_TF] = list(
+        zip(
+            tf_ns.tolist(),
+            _encode_tf(
+                [(m.parent, m.child) for m in moving],
+                tf_ns,
+                [pose7_from_matrix(m.child2parent) for m in moving],
+            ),
+            strict=True,
+        )
+    )
+
+    if len(take.frame_times):
+        messages[TOPIC_FRAMES] = list(
+            zip(seconds_to_ns(take.frame_times).tolist(), _encode_shot_frames(take), strict=True)
+        )
+    return _Records(messages)
+
+
+def _write_mcap(
+    stream: IO[bytes],
+    records: _Records,
+    metadata: dict[str, str],
+    robot_metadata: dict[str, str],
+) -> None:
+    writer = McapWriter(stream, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
+    writer.start(profile=PROFILE, library=_library_identifier())
+    schema_ids: dict[str, int] = {}
+    for schema_name in dict.fromkeys(TOPICS.values()):
+        schema_ids[schema_name] = writer.register_schema(
+            name=schema_name,
+            encoding="ros2msg",
+            data=message_definition(schema_name).encode("utf-8"),
+        )
+    channel_ids = {
+        topic: writer.register_channel(
+            topic=topic, message_encoding="cdr", schema_id=schema_ids[schema_name]
+        )
+        for topic, schema_name in TOPICS.items()
+    }
+    # All messages in log-time order; same-time messages in topic order, then sequence.
+    queue: list[tuple[int, int, int, bytes]] = []
+    for rank, topic in enumerate(TOPICS):
+        queue.extend(
+            (log_ns, rank, seq, data) for seq, (log_ns, data) in enumerate(records.messages[topic])
+        )
+    queue.sort(key=lambda item: (item[0], item[1], item[2]))
+    topics = list(TOPICS)
+    add = writer.add_message
+    for log_ns, rank, seq, data in queue:
+        add(
+            channel_id=channel_ids[topics[rank]],
+            log_time=log_ns,
+            data=data,
+            publish_time=log_ns,
+            sequence=seq,
+        )
+    writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
+    writer.add_metadata(ROBOT_METADATA_NAME, robot_metadata)
+    writer.finish()  # type: ignore[no-untyped-call]
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)  # arrays: compare fields, not objects
+class TopicInfo:
+    """One channel of the file.
+
+    Attributes:
+        topic: Topic name. schema_name: e.g. ``sensor_msgs/msg/JointState``.
+        schema_encoding: ``ros2msg``. message_encoding: ``cdr``.
+        schema_text: The embedded message definition.
+        message_count: Number of messages.
+        log_time_ns: Log time per message [ns], shape (count,).
+        publish_time_ns: Publish time per message [ns], shape (count,).
+    """
+
+    topic: str
+    schema_name: str
+    schema_encoding: str
+    message_encoding: str
+    schema_text: str
+    message_count: int
+    log_time_ns: NDArray[np.int64]
+    publish_time_ns: NDArray[np.int64]
+
+
+@dataclass(frozen=True, eq=False)  # arrays: compare fields, not objects
+class ReadTake:
+    """A camtraj MCAP file decoded (with mcap_ros2) back into arrays.
+
+    Attributes:
+        profile: The MCAP header profile (``ros2``). library: The header's library string.
+        joint_names: Names in /joint_states.
+        t: /joint_states header stamps [s], shape (m,).
+        q: Positions, shape (m, 8). qd: Velocities, shape (m, 8).
+        effort_sizes: Length of each message's effort array, shape (m,) (all 0).
+        trajectory_joint_names: /joint_trajectory joint names.
+        trajectory_stamp: /joint_trajectory header stamp [s].
+        trajectory_t: Each point's time_from_start [s], shape (m,).
+        trajectory_q, trajectory_qd, trajectory_qdd: Shape (m, 8) each.
+        frame_numbers: /shot/frames frame, shape (n,). frame_times: time [s], shape (n,).
+        frame_names: Joint names of the frames (the same in every message).
+        frame_q: Positions, shape (n, 8).
+        target, achieved: Camera poses as transforms, shape (n, 4, 4).
+        focal_length_mm, focus_distance_m, f_stop: Lens values, shape (n,).
+        tf_times: /tf stamps [s], shape (k,).
+        tf: child frame -> (parent frame, child2parent of shape (k, 4, 4)).
+        tf_static: child frame -> (parent frame, child2parent of shape (4, 4)).
+        robot_description: The URDF text.
+        metadata: The ``camtraj`` metadata record.
+        all_metadata: Every metadata record by name.
+        topics: Topic name -> TopicInfo.
+    """
+
+    profile: str
+    library: str
+    joint_names: tuple[str, ...]
+    t: Array
+    q: Array
+    qd: Array
+    effort_sizes: NDArray[np.int64]
+    trajectory_joint_names: tuple[str, ...]
+    trajectory_stamp: float
+    trajectory_t: Array
+    trajectory_q: Array
+    trajectory_qd: Array
+    trajectory_qdd: Array
+    frame_numbers: NDArray[np.int64]
+    frame_times: Array
+    frame_names: tuple[str, ...]
+    frame_q: Array
+    target: Array
+    achieved: Array
+    focal_length_mm: Array
+    focus_distance_m: Array
+    f_stop: Array
+    tf_times: Array
+    tf: dict[str, tuple[str, Array]]
+    tf_static: dict[str, tuple[str, Array]]
+    robot_description: str
+    metadata: dict[str, str]
+    all_metadata: dict[str, dict[str, str]]
+    topics: dict[str, TopicInfo]
+
+
+def _stamp(obj: Any) -> float:
+    return float(obj.sec) + float(obj.nanosec) * 1e-9
+
+
+def _pose7(pose: Any) -> list[float]:
+    p, o = pose.position, pose.orientation
+    return [p.x, p.y, p.z, o.x, o.y, o.z, o.w]
+
+
+def _transform7(tr: Any) -> list[float]:
+    v, r = tr.translation, tr.rotation
+    return [v.x, v.y, v.z, r.x, r.y, r.z, r.w]
+
+
+def _open_for_reading(path: Path) -> IO[bytes]:
+    try:
+        return path.open("rb")
+    except OSError as exc:
+        msg = f"cannot read {path}: {_reason(exc)}"
+        raise InputError(msg) from exc
+
+
+def _guard(path: Path, action: Callable[[], Any]) -> Any:
+    """Run a reading step; any failure of the MCAP/CDR layers becomes an InputError."""
+    try:
+        return action()
+    except CamtrajError:
+        raise
+    except OSError as exc:
+        msg = f"cannot read {path}: {_reason(exc)}"
+        raise InputError(msg) from exc
+    except Exception as exc:
+        msg = f"{path}: not a readable MCAP file ({type(exc).__name__}: {exc})"
+        raise InputError(msg) from exc
+
+
+def _names(values: Iterable[str]) -> tuple[str, ...]:
+    return tuple(str(v) for v in values)
+
+
+def read_take(path: str | Path) -> ReadTake:
+    """Read a camtraj MCAP file back, decoding every message with mcap_ros2.
+
+    Raises:
+        InputError: The file cannot be read, is not MCAP, or lacks a camtraj topic.
+    """
+    path = Path(path)
+    with _open_for_reading(path) as stream:
+        result: ReadTake = _guard(path, lambda: _read(path, stream))
+    return result
+
+
+def _read(path: Path, stream: IO[bytes]) -> ReadTake:
+    reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+    header = reader.get_header()
+    summary = reader.get_summary()
+    if summary is None:
+        msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
+        raise InputError(msg)
+    topics_present = {ch.topic for ch in summary.channels.values()}
+    missing = [t for t in TOPICS if t not in topics_present]
+    if missing:
+        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
+        raise InputError(msg)
+
+    by_topic: dict[str, list[Any]] = {t: [] for t in topics_present}
+    times: dict[str, list[tuple[int, int]]] = {t: [] for t in topics_present}
+    for _schema, channel, message, decoded in reader.iter_decoded_messages(
+        log_time_order=False
+    ):
+        by_topic[channel.topic].append(decoded)
+        times[channel.topic].append((message.log_time, message.publish_time))
+
+    topics: dict[str, TopicInfo] = {}
+    for channel in summary.channels.values():
+        schema = summary.schemas.get(channel.schema_id)
+        lt = np.array([a for a, _ in times[channel.topic]], dtype=np.int64)
+        pt = np.array([b for _, b in times[channel.topic]], dtype=np.int64)
+        topics[channel.topic] = TopicInfo(
+            topic=channel.topic,
+            schema_name=schema.name if schema else "",
+            schema_encoding=schema.encoding if schema else "",
+            message_encoding=channel.message_encoding,
+            schema_text=schema.data.decode("utf-8") if schema else "",
+            message_count=len(lt),
+            log_time_ns=lt,
+            publish_time_ns=pt,
+        )
+    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
+        if len(by_topic[topic]) != 1:
+            msg = f"{path}: {topic} has {len(by_topic[topic])} messages, expected 1"
+            raise InputError(msg)
+
+    js = by_topic[TOPIC_JOINT_STATES]
+    if not js:
+        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
+        raise InputError(msg)
+    joint_names = _names(js[0].name)
+    traj = by_topic[TOPIC_TRAJECTORY][0]
+    points = traj.points
+    frames = by_topic[TOPIC_FRAMES]
+    n_joints = len(joint_names)
+
+    tf_msgs = by_topic[TOPIC_TF]
+    tf: dict[str, tuple[str, Array]] = {}
+    if tf_msgs:
+        first = tf_msgs[0].transforms
+        for i, tr in enumerate(first):
+            tf[str(tr.child_frame_id)] = (
+                str(tr.header.frame_id),
+                matrix_from_pose7(
+                    np.array([_transform7(m.transforms[i].transform) for m in tf_msgs])
+                ),
+            )
+    tf_static = {
+        str(tr.child_frame_id): (
+            str(tr.header.frame_id),
+            matrix_from_pose7(np.array(_transform7(tr.transform))),
+        )
+        for tr in by_topic[TOPIC_TF_STATIC][0].transforms
+    }
+
+    all_metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
+
+    def rows(values: list[Any], width: int) -> Array:
+        return np.array(values, dtype=float).reshape(len(values), width)
+
+    return ReadTake(
+        profile=header.profile,
+        library=header.library,
+        joint_names=joint_names,
+        t=np.array([_stamp(m.header.stamp) for m in js]),
+        q=rows([list(m.position) for m in js], n_joints),
+        qd=rows([list(m.velocity) for m in js], n_joints),
+        effort_sizes=np.array([len(m.effort) for m in js], dtype=np.int64),
+        trajectory_joint_names=_names(traj.joint_names),
+        trajectory_stamp=_stamp(traj.header.stamp),
+        trajectory_t=np.array([_stamp(p.time_from_start) for p in points]),
+        trajectory_q=rows([list(p.positions) for p in points], n_joints),
+        trajectory_qd=rows([list(p.velocities) for p in points], n_joints),
+        trajectory_qdd=rows([list(p.accelerations) for p in points], n_joints),
+        frame_numbers=np.array([m.frame for m in frames], dtype=np.int64),
+        frame_times=np.array([m.time for m in frames], dtype=float),
+        frame_names=_names(frames[0].name) if frames else joint_names,
+        frame_q=rows([list(m.position) for m in frames], n_joints),
+        target=matrix_from_pose7(rows([_pose7(m.target) for m in frames], 7)),
+        achieved=matrix_from_pose7(rows([_pose7(m.achieved) for m in frames], 7)),
+        focal_length_mm=np.array([m.focal_length_mm for m in frames], dtype=float),
+        focus_distance_m=np.array([m.focus_distance_m for m in frames], dtype=float),
+        f_stop=np.array([m.f_stop for m in frames], dtype=float),
+        tf_times=np.array([_stamp(m.transforms[0].header.stamp) for m in tf_msgs if m.transforms]),
+        tf=tf,
+        tf_static=tf_static,
+        robot_description=str(by_topic[TOPIC_DESCRIPTION][0].data),
+        metadata=all_metadata.get(METADATA_NAME, {}),
+        all_metadata=all_metadata,
+        topics=topics,
+    )
+
+
+def describe(path: str | Path) -> dict[str, Any]:
+    """A JSON-friendly summary of a camtraj MCAP file, for ``camtraj info``.
+
+    Reads the summary section and decodes only /shot/frames and the metadata.
+
+    Returns:
+        Keys: ``path``, ``size_bytes``, ``profile``, ``library``, ``source_file``,
+        ``camera_prim`` (from the metadata, or None), ``frames`` (count, first, last),
+        ``duration_s``, ``servo_rate_hz``, ``frame_rate_hz``, ``topics`` (list of topic,
+        type, count), ``limits`` (the robot's joint names and limits, or None),
+        ``metadata`` (the ``camtraj`` record).
+
+    Raises:
+        InputError: The file cannot be read or is not MCAP.
+    """
+    path = Path(path)
+    with _open_for_reading(path) as stream:
+        result: dict[str, Any] = _guard(path, lambda: _describe(path, stream))
+    return result
+
+
+def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
+    reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+    header = reader.get_header()
+    summary = reader.get_summary()
+    if summary is None or summary.statistics is None:
+        msg = f"{path}: the MCAP file has no summary statistics (was it written completely?)"
+        raise InputError(msg)
+    stats = summary.statistics
+    counts = stats.channel_message_counts
+    topics = []
+    count_by_topic: dict[str, int] = {}
+    for cid, channel in sorted(summary.channels.items()):
+        schema = summary.schemas.get(channel.schema_id)
+        count_by_topic[channel.topic] = int(counts.get(cid, 0))
+        topics.append(
+            {
+                "topic": channel.topic,
+                "type": schema.name if schema else "",
+                "encoding": channel.message_encoding,
+                "count": int(counts.get(cid, 0)),
+            }
+        )
+    metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
+    take_md = metadata.get(METADATA_NAME, {})
+    robot_md = metadata.get(ROBOT_METADATA_NAME)
+    limits = {key: json.loads(value) for key, value in robot_md.items()} if robot_md else None
+
+    frame_numbers: list[int] = []
+    frame_times: list[float] = []
+    if TOPIC_FRAMES in count_by_topic:
+        for _s, _c, _m, msg in reader.iter_decoded_messages(topics=[TOPIC_FRAMES]):
+            frame_numbers.append(int(msg.frame))
+            frame_times.append(float(msg.time))
+    duration = (stats.message_end_time - stats.message_start_time) / _NS
+    n_js = count_by_topic.get(TOPIC_JOINT_STATES, 0)
+    servo_rate = (n_js - 1) / duration if duration > 0 and n_js > 1 else None
+    frame_rate: float | None = None
+    try:
+        frame_rate = float(take_md["fps"])
+    except (KeyError, ValueError):
+        if len(frame_times) > 1 and frame_times[-1] > frame_times[0]:
+            frame_rate = (len(frame_times) - 1) / (frame_times[-1] - frame_times[0])
+    return {
+        "path": str(path),
+        "size_bytes": path.stat().st_size,
+        "profile": header.profile,
+        "library": header.library,
+        "source_file": take_md.get("source_file", take_md.get("source")),
+        "camera_prim": take_md.get("camera_prim", take_md.get("camera")),
+        "frames": {
+            "count": len(frame_numbers),
+            "first": frame_numbers[0] if frame_numbers else None,
+            "last": frame_numbers[-1] if frame_numbers else None,
+            "start_s": frame_times[0] if frame_times else None,
+            "end_s": frame_times[-1] if frame_times else None,
+        },
+        "duration_s": duration,
+        "servo_rate_hz": servo_rate,
+        "frame_rate_hz": frame_rate,
+        "topics": topics,
+        "limits": limits,
+        "metadata": take_md,
+    }
