@@ -508,26 +508,28 @@ class _Problem:
             return
         if any(a <= r1p <= b for a, b in self.intervals):
             r1s = np.append(r1s, r1p)
-        seeds = self._grid(r1s, n4, r4p, ball)
+        seeds = self._grid(r1s, n4, r4p, ball)[:keep]
         span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
-        w1, wt = span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)
-        for _ in range(40):
-            if w1 <= tol and wt <= 1e-9:
+        # each seed zooms in its own window; a window whose best point lands on its edge
+        # moves there without shrinking (the optimum may lie beyond it)
+        windows = [(r1c, tc, span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)) for r1c, tc in seeds]
+        for _ in range(60):
+            windows = [w for w in windows if w[2] > tol or w[3] > 1e-9]
+            if not windows:
                 break
-            seeds = seeds[:keep]
-            if not seeds:
-                return
-            cols: list[Array] = []
-            windows: list[tuple[float, float]] = []
-            for r1c, tc in seeds:
-                c = np.linspace(r1c - w1, r1c + w1, 7)
+            nxt = []
+            for r1c, tc, w1, wt in windows:
+                col = np.linspace(r1c - w1, r1c + w1, 7)
                 if r1c - w1 <= r1p <= r1c + w1:
-                    c = np.append(c, r1p)
-                cols.append(c)
-                windows.append((tc - wt, tc + wt))
-            seeds = self._grid_multi(cols, windows, 7, r4p, self.ball())
-            w1 *= zoom
-            wt *= zoom
+                    col = np.append(col, r1p)
+                found = self._grid_multi([col], [(tc - wt, tc + wt)], 7, r4p, self.ball())
+                if not found:
+                    continue
+                r1n, tn = found[0]
+                edge1 = abs(abs(r1n - r1c) - w1) < 1e-12 * max(1.0, abs(r1c))
+                edge_t = abs(abs(tn - tc) - wt) < 1e-12 and 0.0 < tn < 1.0
+                nxt.append((r1n, tn, w1 if edge1 else w1 * zoom, wt if edge_t else wt * zoom))
+            windows = nxt
 
     def _grid(self, r1s: Array, n4: int, r4p: float, ball: float) -> list[tuple[float, float]]:
         return self._grid_multi([r1s], [(0.0, 1.0)], n4, r4p, ball)
@@ -815,3 +817,66 @@ def _diagnose(robot: Robot, T: Array, prev: Array) -> UnreachableError:
         f"{where} needs {name} {math.degrees(amount):.1f} deg beyond its limit",
         miss=amount, miss_unit="rad", axis=name,
     )
+
+
+def traverse(
+    robot: Robot,
+    target: ArrayLike,
+    previous: ArrayLike,
+    *,
+    objective: str = "paper",
+    radius: float | None = None,
+    n1: int = 401,
+    n4: int = 101,
+    refine: int = 2,
+) -> IKSolution:
+    """Dense traversal of (track, extend): the brute-force check the SM paper used.
+
+    Every point of an n1 x n4 grid over the track and extend limits (or over the box of
+    half-width ``radius`` around the previous values, which must contain the optimum when
+    ``radius >= F_known / min(w_track, w_extend)``) is solved in closed form on all branches;
+    each extend column also holds the previous extend value and the ends of its reach interval.
+    The best ``refine`` times: a grid ten times finer over the 2 x 2 cells around the best point.
+    Slow by design (no search logic to trust); for tests and benchmarks.
+
+    Raises:
+        UnreachableError: Nothing on the grid is feasible.
+    """
+    T = _check_target(target)
+    prev = np.asarray(previous, dtype=float)
+    bounds = _bounds_for(robot, objective, objective == "smooth", prev, None)
+    prob = _Problem(robot, T, prev, bounds)
+    r1p, r4p = float(prev[_TRACK]), float(prev[_EXTEND])
+    lo1, hi1 = float(bounds.lower[_TRACK]), float(bounds.upper[_TRACK])
+    lo4, hi4 = float(bounds.lower[_EXTEND]), float(bounds.upper[_EXTEND])
+    if radius is not None:
+        lo1, hi1 = max(lo1, r1p - radius), min(hi1, r1p + radius)
+        lo4, hi4 = max(lo4, r4p - radius), min(hi4, r4p + radius)
+
+    def sweep(a1: float, b1: float, a4: float, b4: float, m1: int, m4: int) -> None:
+        r1s = np.linspace(a1, b1, m1)
+        if a1 <= r1p <= b1:
+            r1s = np.append(r1s, r1p)
+        ilo, ihi = prob.region.r4_interval(r1s)
+        rows = np.linspace(a4, b4, m4)
+        for k in range(0, r1s.size, 64):
+            c = r1s[k:k + 64]
+            extra = np.stack([np.full(c.size, r4p), ilo[k:k + 64], ihi[k:k + 64]], axis=1)
+            r4 = np.concatenate([np.broadcast_to(rows, (c.size, rows.size)), extra], axis=1)
+            keep = (r4 >= a4) & (r4 <= b4)
+            r1 = np.broadcast_to(c[:, None], r4.shape)[keep]
+            if r1.size:
+                prob.evaluate(r1, r4[keep])
+
+    sweep(lo1, hi1, lo4, hi4, n1, n4)
+    d1, d4 = (hi1 - lo1) / max(n1 - 1, 1), (hi4 - lo4) / max(n4 - 1, 1)
+    for _ in range(refine):
+        if prob.best_q is None:
+            break
+        c1, c4 = prob.best_q[_TRACK], prob.best_q[_EXTEND]
+        sweep(max(c1 - 2 * d1, lo1), min(c1 + 2 * d1, hi1),
+              max(c4 - 2 * d4, lo4), min(c4 + 2 * d4, hi4), 41, 41)
+        d1, d4 = d1 / 10, d4 / 10
+    if prob.best_q is None:
+        raise UnreachableError("no grid point of the traversal reaches the target", miss=math.inf)
+    return IKSolution(prob.best_q, prob.best_cost, prob.best_branch)

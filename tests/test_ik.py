@@ -1,0 +1,168 @@
+"""SM inverse kinematics against independent facts: FK, the papers' case, brute force."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from camtraj import Robot, UnreachableError, UnreachableFramesError
+from camtraj.ik import motion_cost, six_axis_solutions, solve_ik, solve_path, traverse
+
+from .conftest import camera_path, pose_error
+from .test_robot import GA_EQ16, GA_TARGET
+
+W_MIN = 50000.0  # the smaller of the track / extend weights (per metre)
+
+
+def test_closed_form_contains_every_configuration(robot: Robot) -> None:
+    """For random joint vectors, the six-axis substructure at the same track/extend holds it."""
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        q = rng.uniform(robot.lower, robot.upper)
+        T = robot.fk(q)
+        qs, ok = six_axis_solutions(robot.dh, T, q[[0]], q[[3]], q, robot.lower, robot.upper)
+        assert np.abs(qs[0] - q).max(axis=1).min() < 1e-9
+        for branch in np.flatnonzero(ok[0]):
+            dp, dr = pose_error(robot.fk(qs[0, branch]), T)
+            assert dp < 1e-9 and dr < 1e-9
+
+
+def test_ga_case_beats_the_published_optimum(robot: Robot) -> None:
+    sol = solve_ik(robot, GA_TARGET, np.zeros(8), objective="paper")
+    dp, dr = pose_error(robot.fk(sol.q), GA_TARGET)
+    assert dp < 1e-9 and dr < 1e-9
+    assert robot.within_limits(sol.q)
+    published = float(motion_cost(robot, GA_EQ16, np.zeros(8)))
+    assert published == pytest.approx(70283, abs=1.0)
+    assert sol.cost <= published
+    assert sol.cost == pytest.approx(motion_cost(robot, sol.q, np.zeros(8)))
+    # the issue's dense traversal with extend up to 1.5 m finds F ~ 48 060
+    assert sol.cost == pytest.approx(48060, abs=5)
+    brute = traverse(robot, GA_TARGET, np.zeros(8), objective="paper")
+    assert abs(sol.cost - brute.cost) <= 1e-3 * brute.cost
+
+
+def _random_reachable(robot: Robot, n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    m = robot.ik.limit_margin
+    q = rng.uniform(robot.lower + 2 * m, robot.upper - 2 * m, size=(n, 8))
+    return robot.fk(q)
+
+
+def test_random_reachable_poses_round_trip(robot: Robot) -> None:
+    targets = _random_reachable(robot, 500, seed=2)
+    for T in targets:
+        sol = solve_ik(robot, T, robot.home)
+        dp, dr = pose_error(robot.fk(sol.q), T)
+        assert dp < 1e-9 and dr < 1e-9
+        assert robot.within_limits(sol.q, tol=1e-12)
+
+
+def test_unreachable_poses_say_by_how_much(robot: Robot) -> None:
+    dh = robot.dh
+    # straight sideways from the track: the farthest the wrist centre gets from the track
+    # line (at shoulder height) is the arm fully stretched at full extension
+    reach = math.hypot(robot.upper[3] + dh.r40, dh.l3) + dh.r6
+    T = np.eye(4)
+    T[:3, 3] = (5.0, reach + 0.75, dh.r2)
+    with pytest.raises(UnreachableError) as info:
+        solve_ik(robot, T, robot.home)
+    assert info.value.miss == pytest.approx(0.75, abs=1e-9)
+    assert "0.750 m" in str(info.value)
+    # beyond the end of the track
+    T[:3, 3] = (robot.upper[0] + dh.r10 + reach + 2.0, 0.0, dh.r2)
+    with pytest.raises(UnreachableError) as info:
+        solve_ik(robot, T, robot.home)
+    assert info.value.miss == pytest.approx(2.0, abs=1e-9)
+
+
+def test_unreachable_frames_are_all_listed(robot: Robot) -> None:
+    targets = camera_path(robot, 24)
+    targets[5:8, 1, 3] += 20.0
+    with pytest.raises(UnreachableFramesError) as info:
+        solve_path(robot, targets, frame_numbers=np.arange(1001, 1025))
+    assert [e.frame for e in info.value.errors] == [1006, 1007, 1008]
+    assert "frames 1006-1008" in str(info.value)
+
+
+def _workspace_poses(robot: Robot, n: int) -> np.ndarray:
+    """Poses spread over the workspace: a lattice of positions, varied headings and tilts."""
+    out = []
+    look = robot.camera_pose(np.zeros(8))[:3, :3]
+    rng = np.random.default_rng(3)
+    for x in (3.0, 5.0, 7.0):
+        for y in (-2.0, 0.0, 2.0):
+            for z in (-0.3, 1.0, 2.0):
+                a, b = rng.uniform(-1.0, 1.0), rng.uniform(-0.5, 0.5)
+                ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
+                R = np.array([[ca, -sa, 0], [sa, ca, 0], [0, 0, 1]]) @ np.array(
+                    [[cb, 0, sb], [0, 1, 0], [-sb, 0, cb]])
+                T = np.eye(4)
+                T[:3, :3] = R @ look
+                T[:3, 3] = (x, y, z)
+                out.append(T @ np.linalg.inv(robot.camera2flange))
+    return np.array(out[:n])
+
+
+@pytest.mark.parametrize("objective", ["paper", "smooth"])
+def test_optimal_over_the_workspace(robot: Robot, objective: str) -> None:
+    poses = _workspace_poses(robot, 30)
+    assert len(poses) >= 27
+    start = robot.home
+    for T in poses:
+        sol = solve_ik(robot, T, start, objective=objective)
+        brute = traverse(robot, T, start, objective=objective,
+                         radius=sol.cost / W_MIN * 1.001 + 1e-6, n1=161, n4=61)
+        assert sol.cost <= brute.cost * (1 + 1e-3) + 1e-9
+        # and the traversal is dense enough to be a meaningful reference
+        assert brute.cost <= sol.cost * (1 + 1e-2) + 1e-6
+
+
+def test_optimal_on_every_frame_of_a_smooth_path(robot: Robot) -> None:
+    targets = camera_path(robot, 240)
+    q = solve_path(robot, targets, objective="paper")
+    prev = robot.home
+    for i, T in enumerate(targets):
+        cost = float(motion_cost(robot, q[i], prev))
+        brute = traverse(robot, T, prev, objective="paper",
+                         radius=cost / W_MIN * 1.001 + 1e-6, n1=41, n4=21, refine=3)
+        assert cost <= brute.cost * (1 + 1e-3) + 1e-9, f"frame {i}"
+        prev = q[i]
+
+
+def test_smooth_path_has_no_branch_flips(robot: Robot) -> None:
+    dt = 1 / 24
+    targets = camera_path(robot, 240)
+    q = solve_path(robot, targets, frame_interval=dt)
+    dp, dr = pose_error(robot.fk(q), targets)
+    assert dp < 1e-9 and dr < 1e-9
+    steps = np.abs(np.diff(q, axis=0))
+    # within one frame's travel at each axis's velocity limit
+    assert np.all(steps <= robot.max_velocity * dt + 1e-12)
+    # and really small: a flip moves pan/roll by ~pi, the elbow by tenths of a radian
+    assert steps[:, 1:].max() < 0.1
+    # the path keeps its distance from full stretch and the wrist singularity
+    frames = robot.link_frames(q)
+    wrist = frames[:, 6, :3, 3]
+    elbow = frames[:, 4, :3, 3]
+    shoulder = frames[:, 2, :3, 3]
+    se = np.linalg.norm(elbow - shoulder, axis=1)
+    ew = np.linalg.norm(wrist - elbow, axis=1)
+    sw = np.linalg.norm(wrist - shoulder, axis=1)
+    interior = np.arccos((se**2 + ew**2 - sw**2) / (2 * se * ew))
+    assert np.all(math.pi - interior >= robot.ik.stretch_margin - 1e-9)
+    assert np.all(np.abs(np.cos(q[:, 6])) >= math.sin(robot.ik.wrist_margin) - 1e-9)
+
+
+def test_paper_objective_rides_full_stretch_smooth_keeps_margin(robot: Robot) -> None:
+    """Why the smooth default exists: the paper objective ends on the elbow singularity."""
+    paper = solve_ik(robot, GA_TARGET, np.zeros(8), objective="paper")
+    smooth = solve_ik(robot, GA_TARGET, np.zeros(8), objective="smooth")
+    for sol, expect_stretched in ((paper, True), (smooth, False)):
+        f = robot.link_frames(sol.q)
+        s, e, w = f[2, :3, 3], f[4, :3, 3], f[6, :3, 3]
+        stretched = np.linalg.norm(w - s) >= np.linalg.norm(e - s) + robot.dh.r6 - 1e-6
+        assert stretched == expect_stretched
+    assert smooth.cost > paper.cost
