@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -100,10 +101,12 @@ def six_axis_solutions(
 
     Args:
         dh: The robot's DH constants.
-        target: Flange pose in the base frame (``flange2base``), shape (4, 4) [m].
+        target: Flange pose in the base frame (``flange2base``), shape (4, 4) [m], or one
+            pose per candidate, shape (N, 4, 4).
         r1: Track values, shape (N,) [m].
         r4: Extend values, shape (N,) [m].
-        previous: Joint vector the revolute axes stay nearest to (2π-equivalents), (8,).
+        previous: Joint vector the revolute axes stay nearest to (2π-equivalents), (8,), or
+            one per candidate, (N, 8).
         lower, upper: Position limits (8,) the solutions must respect.
         stretch_margin: Minimum elbow angle away from full stretch [rad].
         wrist_margin: Minimum tilt angle away from the wrist singularity (±90°) [rad].
@@ -115,17 +118,23 @@ def six_axis_solutions(
     r1a = np.asarray(r1, dtype=float)
     r4a = np.asarray(r4, dtype=float)
     n = r1a.shape[0]
-    W = target[:3, 3]
-    R = target[:3, :3]
+    batched = target.ndim == 3  # one target per candidate
+    W = target[..., :3, 3].T  # (3,) or (3, N)
+    # rotation entries: scalars, or (N, 1) columns that broadcast against (N, 2) arrays
+    R = target[:, :3, :3].transpose(1, 2, 0)[..., None] if batched else target[:3, :3]
+    prev = np.asarray(previous, dtype=float)
+    prev_rotate, prev_pan = prev[..., _ROTATE], prev[..., _PAN]
     dx = W[0] - dh.r10 - r1a  # (N,)
     dy = W[1]
     dz = W[2] - dh.r2
     hor = np.hypot(dx, dy)
     ws2 = np.maximum(hor * hor + dz * dz, 1e-300)
+    dz_col = np.asarray(dz)[..., None]  # (1,) or (N, 1)
 
     # rotate: front (arm plane towards W) and back (plane turned by pi, arm reaching over)
-    th2f = np.arctan2(dy, dx) if dy != 0.0 or np.all(dx != 0.0) else np.where(
-        hor > 1e-12, np.arctan2(dy, dx), previous[_ROTATE])
+    th2f = np.arctan2(dy, dx)
+    if np.any(hor <= 1e-12):  # wrist centre right above the rotate axis: keep the previous
+        th2f = np.where(hor > 1e-12, th2f, prev_rotate)
     th2 = th2f[:, None] + _FRONT_BACK  # (N, 2)
     rho = hor[:, None] * _SIGN2  # (N, 2) signed horizontal distance in the arm plane
 
@@ -139,11 +148,11 @@ def six_axis_solutions(
     beta = np.arctan2(dh.l3, L)
 
     # elbow branches: arm elevation a = angle(w) - beta -/+ gamma   -> (N, 2, 2)
-    a = (np.arctan2(dz, rho) - beta[:, None])[:, :, None] - gamma[:, None, None] * _SIGN2
+    a = (np.arctan2(dz_col, rho) - beta[:, None])[:, :, None] - gamma[:, None, None] * _SIGN2
     ca, sa = np.cos(a), np.sin(a)
     Lb = L[:, None, None]
     dpx = rho[:, :, None] - (Lb * ca - dh.l3 * sa)  # forearm vector W - E in the plane
-    dpz = dz - (Lb * sa + dh.l3 * ca)
+    dpz = dz_col[..., None] - (Lb * sa + dh.l3 * ca)
     psi = np.arctan2(dpx, -dpz)  # forearm angle; theta3 + theta5 = -psi
     cs, ss = np.cos(psi), -np.sin(psi)  # cos/sin of sigma = theta3 + theta5
 
@@ -154,11 +163,12 @@ def six_axis_solutions(
     P0 = (c2 * R[0, 0] + s2 * R[1, 0])[:, :, None]
     P1 = (c2 * R[0, 1] + s2 * R[1, 1])[:, :, None]
     P2 = (c2 * R[0, 2] + s2 * R[1, 2])[:, :, None]
-    m02 = cs * P2 - ss * R[2, 2]
+    R2 = R[2][..., None] if batched else R[2]  # bottom row, broadcast against (N, 2, 2)
+    m02 = cs * P2 - ss * R2[2]
     m12 = (s2 * R[0, 2] - c2 * R[1, 2])[:, :, None]
-    m22 = -ss * P2 - cs * R[2, 2]
-    m20 = -ss * P0 - cs * R[2, 0]
-    m21 = -ss * P1 - cs * R[2, 1]
+    m22 = -ss * P2 - cs * R2[2]
+    m20 = -ss * P0 - cs * R2[0]
+    m21 = -ss * P1 - cs * R2[1]
     c7abs = np.hypot(m02, m12)
     s7 = np.minimum(np.maximum(m22, -1.0), 1.0)
 
@@ -170,11 +180,11 @@ def six_axis_solutions(
     singular = c7abs < _WRIST_EPS
     if singular.any():
         # pan and roll aligned: keep the previous pan, roll takes the rest
-        m00 = cs * P0 - ss * R[2, 0]
+        m00 = cs * P0 - ss * R2[0]
         m10 = (s2 * R[0, 0] - c2 * R[1, 0])[:, :, None]
         s7s = np.where(s7 >= 0, 1.0, -1.0)[..., None]
         combo = np.arctan2(s7s * m10[..., None], s7s * m00[..., None])
-        th6_keep = np.full_like(th6, previous[_PAN])
+        th6_keep = np.broadcast_to(np.asarray(prev_pan).reshape(-1, 1, 1, 1), th6.shape)
         th8_keep = np.where(s7s > 0, th6_keep - combo, combo - th6_keep)
         th6 = np.where(singular[..., None], th6_keep, th6)
         th8 = np.where(singular[..., None], th8_keep, th8)
@@ -192,7 +202,8 @@ def six_axis_solutions(
     q = q5.reshape(n, N_BRANCHES, 8)
 
     rev = q[..., 1:]  # every axis after track except extend is revolute: wrap all, restore
-    wrapped = _nearest_equivalent(rev, previous[1:], lower[1:], upper[1:])
+    prev_rev = prev[..., None, 1:] if prev.ndim == 2 else prev[1:]
+    wrapped = _nearest_equivalent(rev, prev_rev, lower[1:], upper[1:])
     wrapped[..., _EXTEND - 1] = r4a[:, None]
     q[..., 1:] = wrapped
     ok = ((q >= lower - _EDGE) & (q <= upper + _EDGE)).all(axis=-1) & reach_ok[:, None]
@@ -497,8 +508,13 @@ class _Problem:
 
     # -- the 2-D search ---------------------------------------------------------------------
     def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.3,
-                   tol: float = 1e-9) -> None:
-        """Grid over the box that must hold the optimum, then zoom around the best cells."""
+                   tol1: float = 1e-8, tol_t: float = 1e-7) -> None:
+        """Grid over the box that must hold the optimum, then zoom around the best cells.
+
+        Each of the ``keep`` best coarse cells zooms in its own window (all windows in one
+        vectorised evaluation per round); a window whose best point lands on its edge moves
+        there without shrinking, since the optimum may lie beyond it.
+        """
         if not self.intervals:
             return
         r1p, r4p = float(self.prev[_TRACK]), float(self.prev[_EXTEND])
@@ -508,41 +524,42 @@ class _Problem:
             return
         if any(a <= r1p <= b for a, b in self.intervals):
             r1s = np.append(r1s, r1p)
-        seeds = self._grid(r1s, n4, r4p, ball)[:keep]
+        coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
         span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
-        # each seed zooms in its own window; a window whose best point lands on its edge
-        # moves there without shrinking (the optimum may lie beyond it)
-        windows = [(r1c, tc, span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)) for r1c, tc in seeds]
+        windows = [(r1c, tc, span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)) for r1c, tc in coarse]
         for _ in range(60):
-            windows = [w for w in windows if w[2] > tol or w[3] > 1e-9]
+            windows = [w for w in windows if w[2] > tol1 or w[3] > tol_t]
             if not windows:
                 break
-            nxt = []
+            cols, tw = [], []
             for r1c, tc, w1, wt in windows:
                 col = np.linspace(r1c - w1, r1c + w1, 7)
                 if r1c - w1 <= r1p <= r1c + w1:
                     col = np.append(col, r1p)
-                found = self._grid_multi([col], [(tc - wt, tc + wt)], 7, r4p, self.ball())
-                if not found:
+                cols.append(col)
+                tw.append((tc - wt, tc + wt))
+            found = self._grid_windows(cols, tw, 7, r4p, self.ball())
+            nxt = []
+            for (r1c, tc, w1, wt), best in zip(windows, found, strict=True):
+                if best is None:
                     continue
-                r1n, tn = found[0]
+                r1n, tn = best
                 edge1 = abs(abs(r1n - r1c) - w1) < 1e-12 * max(1.0, abs(r1c))
                 edge_t = abs(abs(tn - tc) - wt) < 1e-12 and 0.0 < tn < 1.0
                 nxt.append((r1n, tn, w1 if edge1 else w1 * zoom, wt if edge_t else wt * zoom))
             windows = nxt
 
-    def _grid(self, r1s: Array, n4: int, r4p: float, ball: float) -> list[tuple[float, float]]:
-        return self._grid_multi([r1s], [(0.0, 1.0)], n4, r4p, ball)
-
-    def _grid_multi(self, cols: list[Array], windows: list[tuple[float, float]], n4: int,
-                    r4p: float, ball: float) -> list[tuple[float, float]]:
-        """Evaluate track columns x normalised extend rows; return (r1, t) best first.
+    def _grid_windows(self, cols: list[Array], windows: list[tuple[float, float]], n4: int,
+                      r4p: float, ball: float, ranked: int = 0) -> list[Any]:
+        """Evaluate track columns x normalised extend rows for several windows at once.
 
         Each column's extend range is its closed-form reach interval clipped to the ball; the
         rows spread over that window of it, plus the held extend and the interval ends.
+        Returns the best (r1, t) of each window (None where nothing is feasible), or with
+        ``ranked`` the best ``ranked`` distinct columns of the first window.
         """
-        r1_all, r4_all, t_all = [], [], []
-        for r1s, (t0, t1) in zip(cols, windows, strict=True):
+        r1_all, r4_all, t_all, g_all = [], [], [], []
+        for g, (r1s, (t0, t1)) in enumerate(zip(cols, windows, strict=True)):
             r1s = r1s[(r1s >= self.region.r1_lo) & (r1s <= self.region.r1_hi)]
             lo, hi = self.region.r4_interval(r1s)
             lo = np.maximum(lo, r4p - ball)
@@ -561,23 +578,36 @@ class _Problem:
             r1_all.append(np.broadcast_to(r1s[:, None], r4.shape).ravel())
             r4_all.append(r4.ravel())
             t_all.append(t.ravel())
+            g_all.append(np.full(r4.size, g))
+        out: list[Any] = [None] * len(cols)
         if not r1_all:
-            return []
+            return [] if ranked else out
         r1 = np.concatenate(r1_all)
         r4 = np.concatenate(r4_all)
         t = np.concatenate(t_all)
+        grp = np.concatenate(g_all)
         cost, _ = self.evaluate(r1, r4)
         best = cost.min(axis=1)
-        order = np.argsort(best)
-        out: list[tuple[float, float]] = []
-        seen: set[float] = set()
-        for k in order[:64]:
-            if not math.isfinite(best[k]) or r1[k] in seen:
+        if ranked:
+            order = np.argsort(best)
+            picks: list[tuple[float, float]] = []
+            seen: set[float] = set()
+            for k in order[: 64 * ranked]:
+                if not math.isfinite(best[k]) or float(r1[k]) in seen:
+                    continue
+                seen.add(float(r1[k]))
+                picks.append((float(r1[k]), float(t[k])))
+                if len(picks) == ranked:
+                    break
+            return picks
+        for g in range(len(cols)):
+            idx = np.flatnonzero(grp == g)
+            if idx.size == 0:
                 continue
-            seen.add(float(r1[k]))
-            out.append((float(r1[k]), float(t[k])))
+            k = idx[int(np.argmin(best[idx]))]
+            if math.isfinite(best[k]):
+                out[g] = (float(r1[k]), float(t[k]))
         return out
-
 
 def _bounds_for(robot: Robot, objective: str, with_margins: bool, previous: Array,
                 max_step: Array | None) -> _Bounds:
@@ -621,12 +651,12 @@ def solve_ik(
         objective: ``"smooth"`` or ``"paper"``; default the robot file's ``[ik] objective``.
         max_step: Optional per-axis bound on |q - previous| (8,) [m, rad], e.g. what each axis
             can travel in one frame at its velocity limit. It keeps consecutive frames on one
-            branch; where no solution respects it, it is dropped (and reported).
+            branch; where no solution respects it, it is widened (x2, x4, x8, x16) and only
+            then dropped (``within_step`` is False in either case).
 
     Returns:
-        The solution. With the smooth objective, margins and step bound are relaxed in this
-        order when a pose needs it: step bound kept with hard limits, then margins without the
-        step bound, then neither; ``within_margins`` / ``within_step`` tell which held.
+        The solution. When a pose needs it, the margins are relaxed first (hard limits), then
+        the step bound widened; ``within_margins`` / ``within_step`` tell which held.
 
     Raises:
         UnreachableError: No solution inside the joint limits; says by how much it misses.
@@ -642,15 +672,18 @@ def solve_ik(
         raise ValueError(msg)
     step = None if max_step is None else np.asarray(max_step, dtype=float)
     margins = [True, False] if obj == "smooth" else [False]
-    steps = [True, False] if step is not None else [False]
-    for use_step in steps:
+    # a step bound that cannot be kept is widened before it is dropped, so a move too fast
+    # for the robot stays continuous (the timing stage then reports its speed honestly)
+    scales: list[float | None] = [1.0, 2.0, 4.0, 8.0, 16.0, None] if step is not None else [None]
+    for scale in scales:
         for use_margin in margins:
-            bounds = _bounds_for(robot, obj, use_margin, prev, step if use_step else None)
+            bounds = _bounds_for(robot, obj, use_margin, prev,
+                                 None if scale is None or step is None else step * scale)
             prob = _solve_one(robot, T, prev, bounds)
             if prob.best_q is not None:
                 return IKSolution(prob.best_q, prob.best_cost, prob.best_branch,
                                   within_margins=use_margin or obj == "paper",
-                                  within_step=use_step or step is None)
+                                  within_step=scale == 1.0 or step is None)
     raise _diagnose(robot, T, prev)
 
 
@@ -673,7 +706,9 @@ def solve_path(
         objective: ``"smooth"`` or ``"paper"``; default the robot file's setting.
         frame_interval: Seconds between frames. With the smooth objective it bounds each
             axis's step between consecutive frames by its velocity limit times this interval
-            (no branch flips); ignored by the paper objective.
+            (no branch flips) and enables the track/extend smoothing of
+            :func:`smooth_redundancy` (``[ik] smoothing`` seconds wide); ignored by the paper
+            objective.
         frame_numbers: Film frame numbers (n,) used in error messages; default 0..n-1.
         progress: Called with the number of frames just finished (for a progress bar).
 
@@ -698,12 +733,14 @@ class PathSolution:
         cost: F of each frame against the frame before (n,).
         within_margins: (n,) False where the smooth margins had to be relaxed.
         within_step: (n,) False where the per-frame step bound had to be dropped.
+        smoothed: (n,) True where the smooth objective's track/extend smoothing was applied.
     """
 
     q: Array
     cost: Array
     within_margins: NDArray[np.bool_]
     within_step: NDArray[np.bool_]
+    smoothed: NDArray[np.bool_]
 
 
 def solve_path_report(
@@ -749,7 +786,12 @@ def solve_path_report(
             progress(1)
     if errors:
         raise UnreachableFramesError(errors)
-    return PathSolution(out, cost, margins, steps)
+    smoothed = np.zeros(n, dtype=bool)
+    if obj == "smooth" and frame_interval is not None and robot.ik.smoothing > 0:
+        out, smoothed = smooth_redundancy(robot, Ts, out, robot.ik.smoothing / frame_interval)
+        first = robot.home if start is None else np.asarray(start, dtype=float)
+        cost = motion_cost(robot, out, np.vstack([first, out[:-1]]))
+    return PathSolution(out, cost, margins, steps, smoothed)
 
 
 def motion_cost(robot: Robot, q: ArrayLike, previous: ArrayLike) -> Array:
@@ -880,3 +922,164 @@ def traverse(
     if prob.best_q is None:
         raise UnreachableError("no grid point of the traversal reaches the target", miss=math.inf)
     return IKSolution(prob.best_q, prob.best_cost, prob.best_branch)
+
+
+
+
+def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, upper: Array,
+                      stretch: float, samples: int = 48) -> Array:
+    """Nearest point of each frame's closed-form (track, extend) feasible set.
+
+    The set is bounded by the track and extend limits and by the reach curves: for an extend
+    value the track must lie where the wrist centre is within reach (two intervals, behind and
+    ahead of the target). Points inside stay; others move to the nearest of: the clipped extend
+    at the same track, or a sampled point on the reach curves.
+    """
+    n = red.shape[0]
+    t_lo, t_hi = float(lower[_TRACK]), float(upper[_TRACK])
+    e_lo, e_hi = float(lower[_EXTEND]), float(upper[_EXTEND])
+    r1 = np.clip(red[:, 0], t_lo, t_hi)
+    region = _Region(dh, wrist.T, t_lo, t_hi, e_lo, e_hi, stretch)
+    lo, hi = region.r4_interval(r1)
+    inside = (lo <= hi) & (red[:, 1] >= lo) & (red[:, 1] <= hi)
+    out = np.stack([r1, np.where(lo <= hi, np.clip(red[:, 1], lo, hi), red[:, 1])], axis=1)
+    bad = np.flatnonzero(~inside)
+    if bad.size == 0:
+        return out
+    # reach curves: track values where extend e sits exactly at an end of its interval
+    e = np.linspace(e_lo, e_hi, samples)
+    L = e + dh.r40
+    dse = np.hypot(L, dh.l3)
+    cm, sm = math.cos(stretch), math.sin(stretch)
+    ws_out2 = (dse + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2  # (s,)
+    ws_in2 = L * L + (dh.r6 - dh.l3) ** 2
+    W = wrist[bad]
+    perp2 = W[:, 1] ** 2 + (W[:, 2] - dh.r2) ** 2  # (b,)
+    c = W[:, 0] - dh.r10
+    cands_r1, cands_r4 = [], []
+    for ws2 in (ws_out2, ws_in2):
+        d = np.sqrt(np.maximum(ws2[None, :] - perp2[:, None], 0.0))  # (b, s)
+        valid = ws2[None, :] >= perp2[:, None]
+        for sign in (-1.0, 1.0):
+            r1c = c[:, None] + sign * d
+            ok = valid & (r1c >= t_lo) & (r1c <= t_hi)
+            cands_r1.append(np.where(ok, r1c, np.nan))
+            cands_r4.append(np.broadcast_to(e, r1c.shape))
+    cr1 = np.concatenate(cands_r1, axis=1)
+    cr4 = np.concatenate(cands_r4, axis=1)
+    # clipped-extend candidate (only where the interval is non-empty)
+    clip_ok = (lo <= hi)[bad]
+    cr1 = np.concatenate([cr1, np.where(clip_ok, r1[bad], np.nan)[:, None]], axis=1)
+    cr4 = np.concatenate([cr4, out[bad, 1][:, None]], axis=1)
+    dist = (cr1 - red[bad, 0][:, None]) ** 2 + (cr4 - red[bad, 1][:, None]) ** 2
+    dist = np.where(np.isnan(dist), np.inf, dist)
+    k = np.argmin(dist, axis=1)
+    rows = np.arange(bad.size)
+    good = np.isfinite(dist[rows, k])
+    out[bad[good], 0] = cr1[rows, k][good]
+    out[bad[good], 1] = cr4[rows, k][good]
+    return out
+
+
+def extend_interval(dh: DHConstants, wrist: Array, r1: Array, stretch_margin: float,
+                    r4_lo: float, r4_hi: float) -> tuple[Array, Array]:
+    """Closed-form extend range reaching each wrist centre from each track value.
+
+    Args:
+        dh: DH constants.
+        wrist: Wrist-centre positions (n, 3) [m] (the flange origins).
+        r1: Track values (n,) [m].
+        stretch_margin: Minimum elbow angle from full stretch [rad].
+        r4_lo, r4_hi: Extend limits [m].
+
+    Returns:
+        (lo, hi), each (n,); empty where lo > hi. A superset where other limits bind.
+    """
+    region = _Region(dh, wrist.T, -np.inf, np.inf, r4_lo, r4_hi, stretch_margin)
+    return region.r4_interval(r1)
+
+
+
+def _branch_of(robot: Robot, targets: Array, q: Array) -> NDArray[np.intp]:
+    """Index of the closed-form branch each joint vector (n, 8) lies on."""
+    qs, _ = six_axis_solutions(robot.dh, targets, q[:, _TRACK], q[:, _EXTEND], q,
+                               np.full(8, -np.inf), np.full(8, np.inf))
+    return np.asarray(np.argmin(np.abs(qs - q[:, None, :]).max(axis=2), axis=1))
+
+
+def smooth_redundancy(
+    robot: Robot,
+    targets: ArrayLike,
+    q: ArrayLike,
+    sigma_frames: float,
+    iterations: int = 60,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """Smooth the track/extend path of a solved shot and re-solve the other six axes.
+
+    Frame-by-frame minimisation of the weighted L1 motion holds the prismatic axes still until
+    a target forces them, then moves them only as far as needed and hands over from one to the
+    other abruptly: their velocity jumps, an acceleration spike on a real axis. This pass
+    low-passes track and extend with a Gaussian of ``sigma_frames`` and then, while any frame
+    lies outside its feasible set (on the frame's own branch, with the smooth objective's
+    margins), pushes the path back in with a smooth correction (the projection's offset,
+    itself low-passed), so corners round off instead of being clipped. The six axes are then
+    solved in closed form at the smoothed track/extend on each frame's branch. A frame the
+    correction could not bring inside keeps its frame-by-frame solution.
+
+    Args:
+        robot: The robot.
+        targets: Flange poses (n, 4, 4) [m].
+        q: The frame-by-frame solution (n, 8) [m, rad], continuous from frame to frame.
+        sigma_frames: Width of the Gaussian in frames (0: no smoothing).
+        iterations: Most correction rounds.
+
+    Returns:
+        The smoothed joint path (n, 8) and, per frame, whether the smoothed value was used.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    Ts = np.asarray(targets, dtype=float)
+    q1 = np.asarray(q, dtype=float)
+    n = q1.shape[0]
+    if sigma_frames <= 0 or n < 3:
+        return q1.copy(), np.ones(n, dtype=bool)
+    m = robot.ik.limit_margin
+    lower, upper = robot.lower + m, robot.upper - m
+    stretch, wrist_m = robot.ik.stretch_margin, robot.ik.wrist_margin
+    wrist = Ts[:, :3, 3]
+    branch = _branch_of(robot, Ts, q1)
+    rows = np.arange(n)
+    base = q1[:, [_TRACK, _EXTEND]]
+
+    def solve(red: Array, idx: NDArray[np.intp]) -> tuple[Array, NDArray[np.bool_]]:
+        qs, ok = six_axis_solutions(robot.dh, Ts[idx], red[:, 0], red[:, 1], q1[idx],
+                                    lower, upper, stretch, wrist_m)
+        k = np.arange(idx.size)
+        return qs[k, branch[idx]], ok[k, branch[idx]]
+
+    def project(red: Array) -> Array:
+        out = _corridor_project(robot.dh, wrist, red, lower, upper, stretch)
+        _, ok = solve(out, rows)
+        bad = np.flatnonzero(~ok)
+        # other limits (lift, elbow, tilt, wrist margin) bind: nearest feasible point of a
+        # local probe towards the frame-by-frame solution, which is feasible
+        for frac in (0.1, 0.25, 0.5, 0.75, 1.0):
+            if bad.size == 0:
+                break
+            trial = out[bad] + frac * (base[bad] - out[bad])
+            _, ok_b = solve(trial, bad)
+            out[bad[ok_b]] = trial[ok_b]
+            bad = bad[~ok_b]
+        return out
+
+    red = gaussian_filter1d(base, sigma_frames, axis=0, mode="nearest")
+    for _ in range(iterations):
+        delta = project(red) - red
+        if not np.any(np.abs(delta) > 1e-9):
+            break
+        red = red + 1.5 * gaussian_filter1d(delta, max(sigma_frames / 2, 1.0), axis=0,
+                                           mode="nearest")
+    red = project(red)
+    out, ok = solve(red, rows)
+    out = np.where(ok[:, None], out, q1)
+    return out, ok

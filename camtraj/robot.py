@@ -96,12 +96,14 @@ class IKSettings:
     objective: ``"smooth"`` (margins from full stretch and limits) or ``"paper"``.
     stretch_margin: minimum elbow angle away from full stretch [rad] (smooth only).
     wrist_margin: minimum tilt angle away from ±90°, where pan and roll align [rad].
+    smoothing: width (Gaussian sigma) of the track/extend smoothing of a shot [s]; 0 = off.
     limit_margin: per-joint margin kept inside the position limits [m or rad], shape (8,).
     """
 
     objective: str = "smooth"
     stretch_margin: float = math.radians(20.0)
     wrist_margin: float = math.radians(15.0)
+    smoothing: float = 0.5
     limit_margin: Array = field(
         default_factory=lambda: np.where(PRISMATIC, 0.02, math.radians(2.0))
     )
@@ -344,7 +346,7 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     ik_tab = _table(data, "ik", where, required=False)
     _no_unknown(
         ik_tab,
-        {"objective", "stretch_margin", "wrist_margin", "limit_margin_revolute",
+        {"objective", "stretch_margin", "wrist_margin", "smoothing", "limit_margin_revolute",
          "limit_margin_prismatic"},
         where,
         "[ik]",
@@ -360,6 +362,9 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
                     "ik.wrist_margin", where) * ang
     if not 0.0 <= wrist <= math.radians(45):
         raise fail("ik.wrist_margin", "must be between 0 and 45 deg")
+    smoothing = _number(ik_tab.get("smoothing", 0.5), "ik.smoothing", where)
+    if not 0.0 <= smoothing <= 5.0:
+        raise fail("ik.smoothing", f"= {smoothing}: must be between 0 and 5 s")
     m_rev = _number(ik_tab.get("limit_margin_revolute", math.radians(2.0) / ang),
                     "ik.limit_margin_revolute", where) * ang
     m_pri = _number(ik_tab.get("limit_margin_prismatic", 0.02), "ik.limit_margin_prismatic", where)
@@ -370,7 +375,7 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     if np.any(2 * margin >= upper - lower):
         raise fail("ik", "limit margins leave no room inside an axis's limits")
     ik = IKSettings(objective=objective, stretch_margin=stretch, wrist_margin=wrist,
-                    limit_margin=margin)
+                    smoothing=smoothing, limit_margin=margin)
 
     controller: dict[str, ControllerUnits] = {}
     ctab = _table(data, "controller", where, required=False)

@@ -386,12 +386,13 @@ def orbit_animated_parent() -> str:
 def whip_pan() -> str:
     """A whip pan (Y-up, m, 24 fps): 150° of pan in 8 frames, held before and after.
 
-    Frames 1-48. The camera stands at (6.0, 0.0, 1.5) m, tilt -5°; pan holds 0° to frame
-    16, whips to 150° by frame 24 (peak about 840°/s) and holds to frame 48.
+    Frames 1-48. The camera stands low at (6.0, 0.0, -0.3) m (the robot's track on risers),
+    tilt -5°, where the robot can hang its forearm and pan about the vertical; pan holds 0°
+    to frame 16, whips to 150° by frame 24 (peak about 840°/s) and holds to frame 48.
     """
     frames = np.arange(1, 49, dtype=np.float64)
     pan = 150.0 * ramp(frames, 16, 24)
-    pos = np.tile([6.0, 0.0, 1.5], (len(frames), 1))
+    pos = np.tile([6.0, 0.0, -0.3], (len(frames), 1))
     move = Move(frames, pos, pan, np.full_like(pan, -5.0), 32.0, 4.0, 4.0)
     doc = "camtraj sample: whip pan, 150 degrees in 8 frames (Y-up, metres)."
     body = _scope("Xform", "World", [_camera_prim_trs("whip_cam", move, "Y", 1.0, "    ")])

@@ -1,0 +1,3 @@
+from camtraj.cli import main
+
+main()
