@@ -935,7 +935,6 @@ def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, u
     ahead of the target). Points inside stay; others move to the nearest of: the clipped extend
     at the same track, or a sampled point on the reach curves.
     """
-    n = red.shape[0]
     t_lo, t_hi = float(lower[_TRACK]), float(upper[_TRACK])
     e_lo, e_hi = float(lower[_EXTEND]), float(upper[_EXTEND])
     r1 = np.clip(red[:, 0], t_lo, t_hi)
@@ -979,25 +978,6 @@ def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, u
     out[bad[good], 0] = cr1[rows, k][good]
     out[bad[good], 1] = cr4[rows, k][good]
     return out
-
-
-def extend_interval(dh: DHConstants, wrist: Array, r1: Array, stretch_margin: float,
-                    r4_lo: float, r4_hi: float) -> tuple[Array, Array]:
-    """Closed-form extend range reaching each wrist centre from each track value.
-
-    Args:
-        dh: DH constants.
-        wrist: Wrist-centre positions (n, 3) [m] (the flange origins).
-        r1: Track values (n,) [m].
-        stretch_margin: Minimum elbow angle from full stretch [rad].
-        r4_lo, r4_hi: Extend limits [m].
-
-    Returns:
-        (lo, hi), each (n,); empty where lo > hi. A superset where other limits bind.
-    """
-    region = _Region(dh, wrist.T, -np.inf, np.inf, r4_lo, r4_hi, stretch_margin)
-    return region.r4_interval(r1)
-
 
 
 def _branch_of(robot: Robot, targets: Array, q: Array) -> NDArray[np.intp]:
