@@ -508,7 +508,7 @@ class _Problem:
 
     # -- the 2-D search ---------------------------------------------------------------------
     def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.3,
-                   tol1: float = 1e-8, tol_t: float = 1e-7) -> None:
+                   tol1: float = 1e-10, tol_t: float = 1e-9) -> None:
         """Grid over the box that must hold the optimum, then zoom around the best cells.
 
         Each of the ``keep`` best coarse cells zooms in its own window (all windows in one
@@ -526,8 +526,14 @@ class _Problem:
             r1s = np.append(r1s, r1p)
         coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
         span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
-        windows = [(r1c, tc, span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)) for r1c, tc in coarse]
-        for _ in range(60):
+        w1_0, wt_0 = span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)
+        windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
+        for rnd in range(60):
+            # the cost moves at most ~2 w_min per metre of prismatic motion: stop when the
+            # windows are too small to change it by a millionth
+            if math.isfinite(self.best_cost) and self.w_min > 0:
+                tol1 = max(tol1, 5e-7 * self.best_cost / (2 * self.w_min))
+                tol_t = max(tol_t, tol1 / max(2 * ball, 1e-12))
             windows = [w for w in windows if w[2] > tol1 or w[3] > tol_t]
             if not windows:
                 break
@@ -539,14 +545,19 @@ class _Problem:
                 cols.append(col)
                 tw.append((tc - wt, tc + wt))
             found = self._grid_windows(cols, tw, 7, r4p, self.ball())
+            # windows that stay clearly worse than the best are other, worse basins
+            slack = 1e-3 if rnd < 4 else 1e-7
             nxt = []
             for (r1c, tc, w1, wt), best in zip(windows, found, strict=True):
-                if best is None:
+                if best is None or best[2] > self.best_cost * (1 + slack) + 1e-12:
                     continue
-                r1n, tn = best
+                r1n, tn, _ = best
+                # a best point on the window's edge: the optimum may lie beyond, so the
+                # window follows it and grows instead of shrinking
                 edge1 = abs(abs(r1n - r1c) - w1) < 1e-12 * max(1.0, abs(r1c))
                 edge_t = abs(abs(tn - tc) - wt) < 1e-12 and 0.0 < tn < 1.0
-                nxt.append((r1n, tn, w1 if edge1 else w1 * zoom, wt if edge_t else wt * zoom))
+                nxt.append((r1n, tn, min(2 * w1, w1_0) if edge1 else w1 * zoom,
+                            min(2 * wt, wt_0) if edge_t else wt * zoom))
             windows = nxt
 
     def _grid_windows(self, cols: list[Array], windows: list[tuple[float, float]], n4: int,
@@ -555,8 +566,8 @@ class _Problem:
 
         Each column's extend range is its closed-form reach interval clipped to the ball; the
         rows spread over that window of it, plus the held extend and the interval ends.
-        Returns the best (r1, t) of each window (None where nothing is feasible), or with
-        ``ranked`` the best ``ranked`` distinct columns of the first window.
+        Returns the best (r1, t, cost) of each window (None where nothing is feasible), or
+        with ``ranked`` the best ``ranked`` distinct (r1, t) columns of the first window.
         """
         r1_all, r4_all, t_all, g_all = [], [], [], []
         for g, (r1s, (t0, t1)) in enumerate(zip(cols, windows, strict=True)):
@@ -606,7 +617,7 @@ class _Problem:
                 continue
             k = idx[int(np.argmin(best[idx]))]
             if math.isfinite(best[k]):
-                out[g] = (float(r1[k]), float(t[k]))
+                out[g] = (float(r1[k]), float(t[k]), float(best[k]))
         return out
 
 def _bounds_for(robot: Robot, objective: str, with_margins: bool, previous: Array,
