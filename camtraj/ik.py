@@ -326,6 +326,7 @@ class _Problem:
         self.best_branch = -1
         self.evaluations = 0
         self.calls = 0
+        self.near_line = False
 
     def evaluate(self, r1: Array, r4: Array) -> tuple[Array, Array]:
         """Cost (N, 8) with inf where infeasible, and q (N, 8, 8). Records the best."""
@@ -429,7 +430,10 @@ class _Problem:
         )
         if not at_kink:
             self._zoom_line(all_r1, all_f)
-        return self._extend_sensitivity_ok()
+        if self._extend_sensitivity_ok():
+            return True
+        self.near_line = True  # the optimum is off the held-extend curve, but close to it
+        return False
 
     def _zoom_line(self, r1s: Array, fs: Array, tol: float = 1e-9) -> None:
         """Refine the best track value of the 1-D curve by shrinking brackets."""
@@ -524,10 +528,18 @@ class _Problem:
             return
         if any(a <= r1p <= b for a, b in self.intervals):
             r1s = np.append(r1s, r1p)
-        coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
         span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
         w1_0, wt_0 = span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)
-        windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
+        if self.near_line and self.best_q is not None:
+            # the 1-D search got within a hair of the optimum: zoom around its best point only
+            r1b, r4b = float(self.best_q[_TRACK]), float(self.best_q[_EXTEND])
+            lo, hi = self.region.r4_interval(np.array([r1b]))
+            lo_b, hi_b = max(lo[0], r4p - ball), min(hi[0], r4p + ball)
+            tb = (r4b - lo_b) / (hi_b - lo_b) if hi_b > lo_b else 0.0
+            windows = [(r1b, min(max(tb, 0.0), 1.0), w1_0, wt_0)]
+        else:
+            coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
+            windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
         for rnd in range(60):
             # the cost moves at most ~2 w_min per metre of prismatic motion: stop when the
             # windows are too small to change it by a millionth
