@@ -523,6 +523,8 @@ class _Problem:
             return
         r1p, r4p = float(self.prev[_TRACK]), float(self.prev[_EXTEND])
         ball = self.ball()
+        if ball < 0.01:  # the box of a frame in a smooth move: a centimetre or less
+            n1, n4 = 24, 8
         r1s = self.r1_grid(r1p - ball, r1p + ball, n1)
         if r1s.size == 0:
             return
@@ -540,7 +542,12 @@ class _Problem:
         else:
             coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
             windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
+        history: list[float] = []
         for rnd in range(60):
+            # stop when three rounds improved the best by less than a part in 1e8
+            history.append(self.best_cost)
+            if len(history) > 3 and history[-4] - history[-1] <= 1e-8 * history[-1]:
+                break
             # the cost moves at most ~2 w_min per metre of prismatic motion: stop when the
             # windows are too small to change it by a millionth
             if math.isfinite(self.best_cost) and self.w_min > 0:
