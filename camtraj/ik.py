@@ -27,6 +27,7 @@ sensitivity to them is far below their weights, no other point can be cheaper.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,6 +47,7 @@ _TRACK, _ROTATE, _LIFT, _EXTEND, _ELBOW, _PAN, _TILT, _ROLL = range(8)
 _WRIST_EPS = 1e-10  # |cos tilt| below this is the wrist singularity
 _FAST_RADIUS = 1e-3  # [m] certificate only when the competing region is this small
 _CERT_SAFETY = 0.5  # sensitivity must stay below this fraction of the prismatic weights
+_SMOOTH_TUBE = math.radians(20.0)  # most a revolute axis may move away from its SM solution
 _EDGE = 1e-12  # rounding allowance at closed-form boundaries (reach, limits) [-, m, rad]
 _FRONT_BACK = np.array([0.0, math.pi])
 _SIGN2 = np.array([1.0, -1.0])
@@ -59,16 +61,21 @@ class IKSolution:
         q: Joint vector (8,) [m, rad].
         cost: F = sum(w * |q - previous|) with the robot's weights (per m / per rad).
         branch: Index 0..7 of the closed-form branch (rotate back, elbow, wrist flip bits).
-        within_margins: False when the smooth objective's margins could not be kept and the
-            solution uses the hard limits instead (always True for the paper objective).
+        margin_level: How far the smooth objective's margins had to be relaxed for this pose
+            (see ``MARGIN_LEVELS``): 0 all kept (always 0 for the paper objective).
         within_step: False when a requested per-frame step bound could not be kept.
     """
 
     q: Array
     cost: float
     branch: int
-    within_margins: bool = True
+    margin_level: int = 0
     within_step: bool = True
+
+    @property
+    def within_margins(self) -> bool:
+        """Whether every margin of the smooth objective held."""
+        return self.margin_level == 0
 
 
 @dataclass(frozen=True)
@@ -79,6 +86,7 @@ class _Bounds:
     upper: Array
     stretch_margin: float
     wrist_margin: float = 0.0
+    branch: int | None = None  # restrict the solve to one closed-form branch
 
 
 # ---------------------------------------------------------------------------------------------
@@ -94,8 +102,8 @@ def six_axis_solutions(
     previous: Array,
     lower: Array,
     upper: Array,
-    stretch_margin: float = 0.0,
-    wrist_margin: float = 0.0,
+    stretch_margin: float | Array = 0.0,
+    wrist_margin: float | Array = 0.0,
 ) -> tuple[Array, NDArray[np.bool_]]:
     """All closed-form branches for fixed track and extend values.
 
@@ -107,9 +115,10 @@ def six_axis_solutions(
         r4: Extend values, shape (N,) [m].
         previous: Joint vector the revolute axes stay nearest to (2π-equivalents), (8,), or
             one per candidate, (N, 8).
-        lower, upper: Position limits (8,) the solutions must respect.
-        stretch_margin: Minimum elbow angle away from full stretch [rad].
-        wrist_margin: Minimum tilt angle away from the wrist singularity (±90°) [rad].
+        lower, upper: Position limits (8,) the solutions must respect, or per candidate (N, 8).
+        stretch_margin: Minimum elbow angle away from full stretch [rad], scalar or (N,).
+        wrist_margin: Minimum tilt angle away from the wrist singularity (±90°) [rad], scalar
+            or (N,).
 
     Returns:
         ``q`` of shape (N, 8, 8): for each candidate and branch, the joint vector; and the
@@ -143,7 +152,7 @@ def six_axis_solutions(
     cos_g = (ws2 + dse2 - dh.r6 * dh.r6) / (2.0 * np.sqrt(dse2 * ws2))
     # interior angle at the elbow E (pi at full stretch)
     cos_e = (dse2 + dh.r6 * dh.r6 - ws2) / (2.0 * dh.r6 * np.sqrt(dse2))
-    reach_ok = (np.abs(cos_g) <= 1.0 + _EDGE) & (cos_e >= -math.cos(stretch_margin) - _EDGE)
+    reach_ok = (np.abs(cos_g) <= 1.0 + _EDGE) & (cos_e >= -np.cos(stretch_margin) - _EDGE)
     gamma = np.arccos(np.minimum(np.maximum(cos_g, -1.0), 1.0))  # (N,)
     beta = np.arctan2(dh.l3, L)
 
@@ -203,12 +212,15 @@ def six_axis_solutions(
 
     rev = q[..., 1:]  # every axis after track except extend is revolute: wrap all, restore
     prev_rev = prev[..., None, 1:] if prev.ndim == 2 else prev[1:]
-    wrapped = _nearest_equivalent(rev, prev_rev, lower[1:], upper[1:])
+    if lower.ndim == 2:  # per-candidate limits broadcast over the branches
+        lower, upper = lower[:, None, :], upper[:, None, :]
+    wrapped = _nearest_equivalent(rev, prev_rev, lower[..., 1:], upper[..., 1:])
     wrapped[..., _EXTEND - 1] = r4a[:, None]
     q[..., 1:] = wrapped
     ok = ((q >= lower - _EDGE) & (q <= upper + _EDGE)).all(axis=-1) & reach_ok[:, None]
-    if wrist_margin > 0.0:
-        wrist_ok = np.broadcast_to((c7abs >= math.sin(wrist_margin))[..., None], shape)
+    if np.any(np.asarray(wrist_margin) > 0.0):
+        sin_w = np.sin(np.asarray(wrist_margin, dtype=float)).reshape(-1, 1, 1)
+        wrist_ok = np.broadcast_to((c7abs >= sin_w)[..., None], shape)
         ok &= wrist_ok.reshape(n, N_BRANCHES)
     return q, ok
 
@@ -250,7 +262,7 @@ class _Region:
         """Extend range [lo, hi] that can reach W from track r1 (empty where lo > hi)."""
         dh = self.dh
         ws = self.ws(r1)
-        cm, sm = math.cos(self.stretch), math.sin(self.stretch)
+        cm, sm = np.cos(self.stretch), np.sin(self.stretch)
         dse_min = -dh.r6 * cm + np.sqrt(np.maximum(ws * ws - (dh.r6 * sm) ** 2, 0.0))
         l_min = np.sqrt(np.maximum(dse_min * dse_min - dh.l3 * dh.l3, 0.0))
         l_max = np.sqrt(np.maximum(ws * ws - (dh.r6 - dh.l3) ** 2, 0.0))
@@ -333,6 +345,8 @@ class _Problem:
         b = self.bounds
         q, ok = six_axis_solutions(self.robot.dh, self.target, r1, r4, self.prev,
                                    b.lower, b.upper, b.stretch_margin, b.wrist_margin)
+        if b.branch is not None:
+            ok = ok & (np.arange(N_BRANCHES) == b.branch)
         cost = np.where(ok, np.abs(q - self.prev) @ self.w, np.inf)
         self.evaluations += r1.shape[0]
         self.calls += 1
@@ -639,21 +653,31 @@ class _Problem:
                 out[g] = (float(r1[k]), float(t[k]), float(best[k]))
         return out
 
-def _bounds_for(robot: Robot, objective: str, with_margins: bool, previous: Array,
+# How far the smooth objective's margins are relaxed when a pose needs it, in order:
+# 0 all kept; 1 the wrist margin dropped; 2 also the limit margins (hard limits); 3 also the
+# stretch margin (the papers' constraints). The paper objective always uses level 3.
+MARGIN_LEVELS = 4
+
+
+def _level_margins(robot: Robot, level: ArrayLike) -> tuple[Array, Array, Array, Array]:
+    """Limits and margins per relaxation level: lower, upper (..., 8), stretch, wrist (...)."""
+    lv = np.asarray(level)
+    m = np.where((lv < 2)[..., None], robot.ik.limit_margin, 0.0)
+    stretch = np.where(lv < 3, robot.ik.stretch_margin, 0.0)
+    wrist = np.where(lv < 1, robot.ik.wrist_margin, 0.0)
+    return robot.lower + m, robot.upper - m, stretch, wrist
+
+
+def _bounds_for(robot: Robot, objective: str, level: int, previous: Array,
                 max_step: Array | None) -> _Bounds:
-    if objective == "smooth" and with_margins:
-        m = robot.ik.limit_margin
-        lower, upper = robot.lower + m, robot.upper - m
-        stretch, wrist = robot.ik.stretch_margin, robot.ik.wrist_margin
-    else:
-        lower, upper = robot.lower.copy(), robot.upper.copy()
-        stretch, wrist = 0.0, 0.0
+    lower, upper, stretch, wrist = _level_margins(
+        robot, level if objective == "smooth" else MARGIN_LEVELS - 1)
     if max_step is not None:
         # a step bound is a per-frame box around the previous solution; where the previous
         # solution lies outside the (margin) limits the box is clamped, never inverted
         lower = np.minimum(np.maximum(lower, previous - max_step), upper)
         upper = np.maximum(np.minimum(upper, previous + max_step), lower)
-    return _Bounds(lower, upper, stretch, wrist)
+    return _Bounds(lower, upper, float(stretch), float(wrist))
 
 
 def _solve_one(robot: Robot, target: Array, previous: Array, bounds: _Bounds) -> _Problem:
@@ -671,6 +695,7 @@ def solve_ik(
     *,
     objective: str | None = None,
     max_step: ArrayLike | None = None,
+    branch: int | None = None,
 ) -> IKSolution:
     """Solve one flange pose, minimising weighted motion from ``previous``.
 
@@ -683,6 +708,8 @@ def solve_ik(
             can travel in one frame at its velocity limit. It keeps consecutive frames on one
             branch; where no solution respects it, it is widened (x2, x4, x8, x16) and only
             then dropped (``within_step`` is False in either case).
+        branch: Restrict the solution to this closed-form branch (0..7), e.g. to start a shot
+            elbow-up instead of elbow-down.
 
     Returns:
         The solution. When a pose needs it, the margins are relaxed first (hard limits), then
@@ -701,18 +728,20 @@ def solve_ik(
         msg = f"objective must be 'smooth' or 'paper', got {obj!r}"
         raise ValueError(msg)
     step = None if max_step is None else np.asarray(max_step, dtype=float)
-    margins = [True, False] if obj == "smooth" else [False]
+    levels = range(MARGIN_LEVELS) if obj == "smooth" else [MARGIN_LEVELS - 1]
     # a step bound that cannot be kept is widened before it is dropped, so a move too fast
     # for the robot stays continuous (the timing stage then reports its speed honestly)
     scales: list[float | None] = [1.0, 2.0, 4.0, 8.0, 16.0, None] if step is not None else [None]
     for scale in scales:
-        for use_margin in margins:
-            bounds = _bounds_for(robot, obj, use_margin, prev,
+        for level in levels:
+            bounds = _bounds_for(robot, obj, level, prev,
                                  None if scale is None or step is None else step * scale)
+            if branch is not None:
+                bounds = dataclasses.replace(bounds, branch=branch)
             prob = _solve_one(robot, T, prev, bounds)
             if prob.best_q is not None:
                 return IKSolution(prob.best_q, prob.best_cost, prob.best_branch,
-                                  within_margins=use_margin or obj == "paper",
+                                  margin_level=level if obj == "smooth" else 0,
                                   within_step=scale == 1.0 or step is None)
     raise _diagnose(robot, T, prev)
 
@@ -761,16 +790,21 @@ class PathSolution:
     Attributes:
         q: Joint path (n, 8) [m, rad].
         cost: F of each frame against the frame before (n,).
-        within_margins: (n,) False where the smooth margins had to be relaxed.
+        margin_level: (n,) how far the smooth margins had to be relaxed (0: all kept).
         within_step: (n,) False where the per-frame step bound had to be dropped.
         smoothed: (n,) True where the smooth objective's track/extend smoothing was applied.
     """
 
     q: Array
     cost: Array
-    within_margins: NDArray[np.bool_]
+    margin_level: NDArray[np.int_]
     within_step: NDArray[np.bool_]
     smoothed: NDArray[np.bool_]
+
+    @property
+    def within_margins(self) -> NDArray[np.bool_]:
+        """(n,) whether every margin of the smooth objective held."""
+        return np.asarray(self.margin_level == 0)
 
 
 def solve_path_report(
@@ -783,45 +817,106 @@ def solve_path_report(
     frame_numbers: ArrayLike | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> PathSolution:
-    """:func:`solve_path` with per-frame costs and relaxation flags."""
+    """:func:`solve_path` with per-frame costs and relaxation flags.
+
+    With the smooth objective and a frame interval, a shot whose frames needed relaxed margins
+    or a widened step bound is solved again from each other branch of its first frame (elbow
+    up or down, wrist flipped, arm turned over), and the run needing the fewest relaxed frames
+    (then the least motion) is kept: consecutive frames cannot change branch, so the first
+    frame's branch decides where the whole move can go.
+    """
     Ts = np.asarray(targets, dtype=float)
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4):
         msg = f"targets must have shape (n, 4, 4), got {Ts.shape}"
         raise ValueError(msg)
     n = Ts.shape[0]
     frames = np.arange(n) if frame_numbers is None else np.asarray(frame_numbers)
-    prev = robot.home.copy() if start is None else np.asarray(start, dtype=float).copy()
+    first = robot.home.copy() if start is None else np.asarray(start, dtype=float).copy()
     obj = objective or robot.ik.objective
     step = None
     if frame_interval is not None and obj == "smooth":
         step = robot.max_velocity * float(frame_interval)
-    out = np.empty((n, 8))
-    cost = np.zeros(n)
-    margins = np.ones(n, dtype=bool)
-    steps = np.ones(n, dtype=bool)
-    errors: list[UnreachableError] = []
+    run = _solve_sequence(robot, Ts, first, obj, step, frames, None, progress)
+    if run.errors:
+        raise UnreachableFramesError(run.errors)
+    if step is not None and run.relaxed > 0:
+        for branch in range(N_BRANCHES):
+            if branch == run.first_branch:
+                continue
+            other = _solve_sequence(robot, Ts, first, obj, step, frames, branch, None,
+                                    give_up=run.score)
+            if other.complete and not other.errors and other.score < run.score:
+                run = other
+                if run.relaxed == 0:
+                    break
+    out, cost, levels, steps = run.q, run.cost, run.levels, run.steps
+    smoothed = np.zeros(n, dtype=bool)
+    if obj == "smooth" and frame_interval is not None and robot.ik.smoothing > 0:
+        out, smoothed = smooth_redundancy(robot, Ts, out, robot.ik.smoothing / frame_interval,
+                                          margin_level=levels, max_step=step)
+        cost = motion_cost(robot, out, np.vstack([first, out[:-1]]))
+    return PathSolution(out, cost, levels, steps, smoothed)
+
+
+@dataclass
+class _Run:
+    """One frame-by-frame pass over a shot."""
+
+    q: Array
+    cost: Array
+    levels: NDArray[np.int_]
+    steps: NDArray[np.bool_]
+    errors: list[UnreachableError]
+    first_branch: int
+    complete: bool
+
+    @property
+    def relaxed(self) -> int:
+        return int(np.count_nonzero(self.levels) + np.count_nonzero(~self.steps))
+
+    @property
+    def score(self) -> tuple[int, float]:
+        return self.relaxed, float(self.cost.sum())
+
+
+def _solve_sequence(
+    robot: Robot,
+    Ts: Array,
+    first: Array,
+    obj: str,
+    step: Array | None,
+    frames: NDArray[Any],
+    first_branch: int | None,
+    progress: Callable[[int], None] | None,
+    give_up: tuple[int, float] | None = None,
+) -> _Run:
+    """Solve frame after frame; stop early once the run cannot beat ``give_up``."""
+    n = Ts.shape[0]
+    run = _Run(np.full((n, 8), np.nan), np.zeros(n), np.zeros(n, dtype=int),
+               np.ones(n, dtype=bool), [], -1, False)
+    prev = first
     for i in range(n):
         try:
             # the first frame is reached by the run-up, not within one frame interval
             sol = solve_ik(robot, Ts[i], prev, objective=obj,
-                           max_step=step if i > 0 and not errors else None)
+                           max_step=step if i > 0 and not run.errors else None,
+                           branch=first_branch if i == 0 else None)
         except UnreachableError as exc:
-            errors.append(exc.at_frame(int(frames[i])))
-            out[i] = np.nan
+            if first_branch is not None:
+                return run  # a forced branch that cannot even start: not a candidate
+            run.errors.append(exc.at_frame(int(frames[i])))
         else:
-            out[i], cost[i] = sol.q, sol.cost
-            margins[i], steps[i] = sol.within_margins, sol.within_step
+            run.q[i], run.cost[i] = sol.q, sol.cost
+            run.levels[i], run.steps[i] = sol.margin_level, sol.within_step
+            if i == 0:
+                run.first_branch = sol.branch
             prev = sol.q
         if progress is not None:
             progress(1)
-    if errors:
-        raise UnreachableFramesError(errors)
-    smoothed = np.zeros(n, dtype=bool)
-    if obj == "smooth" and frame_interval is not None and robot.ik.smoothing > 0:
-        out, smoothed = smooth_redundancy(robot, Ts, out, robot.ik.smoothing / frame_interval)
-        first = robot.home if start is None else np.asarray(start, dtype=float)
-        cost = motion_cost(robot, out, np.vstack([first, out[:-1]]))
-    return PathSolution(out, cost, margins, steps, smoothed)
+        if give_up is not None and run.relaxed > give_up[0]:
+            return run
+    run.complete = True
+    return run
 
 
 def motion_cost(robot: Robot, q: ArrayLike, previous: ArrayLike) -> Array:
@@ -845,7 +940,7 @@ def _check_target(target: ArrayLike) -> Array:
 
 def _diagnose(robot: Robot, T: Array, prev: Array) -> UnreachableError:
     """Say why a pose has no solution and by how much it misses."""
-    bounds = _bounds_for(robot, "paper", False, prev, None)
+    bounds = _bounds_for(robot, "paper", MARGIN_LEVELS - 1, prev, None)
     prob = _Problem(robot, T, prev, bounds)
     intervals, miss = prob.intervals, prob.miss
     W = T[:3, 3]
@@ -916,7 +1011,7 @@ def traverse(
     """
     T = _check_target(target)
     prev = np.asarray(previous, dtype=float)
-    bounds = _bounds_for(robot, objective, objective == "smooth", prev, None)
+    bounds = _bounds_for(robot, objective, 0, prev, None)
     prob = _Problem(robot, T, prev, bounds)
     r1p, r4p = float(prev[_TRACK]), float(prev[_EXTEND])
     lo1, hi1 = float(bounds.lower[_TRACK]), float(bounds.upper[_TRACK])
@@ -957,18 +1052,26 @@ def traverse(
 
 
 def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, upper: Array,
-                      stretch: float, samples: int = 48) -> Array:
+                      stretch: Array, samples: int = 48) -> Array:
     """Nearest point of each frame's closed-form (track, extend) feasible set.
 
     The set is bounded by the track and extend limits and by the reach curves: for an extend
     value the track must lie where the wrist centre is within reach (two intervals, behind and
     ahead of the target). Points inside stay; others move to the nearest of: the clipped extend
     at the same track, or a sampled point on the reach curves.
+
+    Args:
+        dh: DH constants.
+        wrist: Wrist centres (n, 3) [m].
+        red: Track and extend per frame (n, 2) [m].
+        lower, upper: Position limits per frame (n, 8).
+        stretch: Stretch margin per frame (n,) [rad].
+        samples: Points per reach curve.
     """
-    t_lo, t_hi = float(lower[_TRACK]), float(upper[_TRACK])
-    e_lo, e_hi = float(lower[_EXTEND]), float(upper[_EXTEND])
+    t_lo, t_hi = lower[:, _TRACK], upper[:, _TRACK]
+    e_lo, e_hi = lower[:, _EXTEND], upper[:, _EXTEND]
     r1 = np.clip(red[:, 0], t_lo, t_hi)
-    region = _Region(dh, wrist.T, t_lo, t_hi, e_lo, e_hi, stretch)
+    region = _Region(dh, wrist.T, -np.inf, np.inf, e_lo, e_hi, stretch)  # type: ignore[arg-type]
     lo, hi = region.r4_interval(r1)
     inside = (lo <= hi) & (red[:, 1] >= lo) & (red[:, 1] <= hi)
     out = np.stack([r1, np.where(lo <= hi, np.clip(red[:, 1], lo, hi), red[:, 1])], axis=1)
@@ -976,24 +1079,26 @@ def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, u
     if bad.size == 0:
         return out
     # reach curves: track values where extend e sits exactly at an end of its interval
-    e = np.linspace(e_lo, e_hi, samples)
+    u = np.linspace(0.0, 1.0, samples)
+    e = e_lo[bad, None] + (e_hi - e_lo)[bad, None] * u  # (b, s)
     L = e + dh.r40
     dse = np.hypot(L, dh.l3)
-    cm, sm = math.cos(stretch), math.sin(stretch)
-    ws_out2 = (dse + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2  # (s,)
+    cm, sm = np.cos(stretch[bad])[:, None], np.sin(stretch[bad])[:, None]
+    ws_out2 = (dse + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2  # (b, s)
     ws_in2 = L * L + (dh.r6 - dh.l3) ** 2
     W = wrist[bad]
-    perp2 = W[:, 1] ** 2 + (W[:, 2] - dh.r2) ** 2  # (b,)
-    c = W[:, 0] - dh.r10
+    perp2 = (W[:, 1] ** 2 + (W[:, 2] - dh.r2) ** 2)[:, None]  # (b, 1)
+    c = (W[:, 0] - dh.r10)[:, None]
+    tl, th = t_lo[bad, None], t_hi[bad, None]
     cands_r1, cands_r4 = [], []
     for ws2 in (ws_out2, ws_in2):
-        d = np.sqrt(np.maximum(ws2[None, :] - perp2[:, None], 0.0))  # (b, s)
-        valid = ws2[None, :] >= perp2[:, None]
+        d = np.sqrt(np.maximum(ws2 - perp2, 0.0))  # (b, s)
+        valid = ws2 >= perp2
         for sign in (-1.0, 1.0):
-            r1c = c[:, None] + sign * d
-            ok = valid & (r1c >= t_lo) & (r1c <= t_hi)
+            r1c = c + sign * d
+            ok = valid & (r1c >= tl) & (r1c <= th)
             cands_r1.append(np.where(ok, r1c, np.nan))
-            cands_r4.append(np.broadcast_to(e, r1c.shape))
+            cands_r4.append(e)
     cr1 = np.concatenate(cands_r1, axis=1)
     cr4 = np.concatenate(cands_r4, axis=1)
     # clipped-extend candidate (only where the interval is non-empty)
@@ -1010,19 +1115,14 @@ def _corridor_project(dh: DHConstants, wrist: Array, red: Array, lower: Array, u
     return out
 
 
-def _branch_of(robot: Robot, targets: Array, q: Array) -> NDArray[np.intp]:
-    """Index of the closed-form branch each joint vector (n, 8) lies on."""
-    qs, _ = six_axis_solutions(robot.dh, targets, q[:, _TRACK], q[:, _EXTEND], q,
-                               np.full(8, -np.inf), np.full(8, np.inf))
-    return np.asarray(np.argmin(np.abs(qs - q[:, None, :]).max(axis=2), axis=1))
-
-
 def smooth_redundancy(
     robot: Robot,
     targets: ArrayLike,
     q: ArrayLike,
     sigma_frames: float,
     iterations: int = 60,
+    margin_level: ArrayLike | None = None,
+    max_step: Array | None = None,
 ) -> tuple[Array, NDArray[np.bool_]]:
     """Smooth the track/extend path of a solved shot and re-solve the other six axes.
 
@@ -1030,10 +1130,11 @@ def smooth_redundancy(
     a target forces them, then moves them only as far as needed and hands over from one to the
     other abruptly: their velocity jumps, an acceleration spike on a real axis. This pass
     low-passes track and extend with a Gaussian of ``sigma_frames`` and then, while any frame
-    lies outside its feasible set (on the frame's own branch, with the smooth objective's
-    margins), pushes the path back in with a smooth correction (the projection's offset,
-    itself low-passed), so corners round off instead of being clipped. The six axes are then
-    solved in closed form at the smoothed track/extend on each frame's branch. A frame the
+    lies outside its feasible set (on the branch nearest the frame's own solution, within the
+    bounds that solution kept), pushes the path back in with a smooth correction (the
+    projection's offset, itself low-passed), so corners round off instead of being clipped.
+    The six axes are then solved in closed form at the smoothed track/extend on that branch.
+    A frame the
     correction could not bring inside keeps its frame-by-frame solution.
 
     Args:
@@ -1042,6 +1143,10 @@ def smooth_redundancy(
         q: The frame-by-frame solution (n, 8) [m, rad], continuous from frame to frame.
         sigma_frames: Width of the Gaussian in frames (0: no smoothing).
         iterations: Most correction rounds.
+        margin_level: Per frame (n,), how far its solution relaxed the smooth objective's
+            margins (``MARGIN_LEVELS``); each frame is smoothed within those bounds. Default 0.
+        max_step: Per-axis step between frames (8,) the smoothed path may always take (e.g.
+            velocity limit x frame interval); faster steps than the input's blend back.
 
     Returns:
         The smoothed joint path (n, 8) and, per frame, whether the smoothed value was used.
@@ -1053,19 +1158,24 @@ def smooth_redundancy(
     n = q1.shape[0]
     if sigma_frames <= 0 or n < 3:
         return q1.copy(), np.ones(n, dtype=bool)
-    m = robot.ik.limit_margin
-    lower, upper = robot.lower + m, robot.upper - m
-    stretch, wrist_m = robot.ik.stretch_margin, robot.ik.wrist_margin
+    # each frame keeps the bounds its frame-by-frame solution was found under
+    level = np.zeros(n, dtype=int) if margin_level is None else np.asarray(margin_level)
+    lower, upper, stretch, wrist_m = _level_margins(robot, level)
     wrist = Ts[:, :3, 3]
-    branch = _branch_of(robot, Ts, q1)
     rows = np.arange(n)
     base = q1[:, [_TRACK, _EXTEND]]
 
     def solve(red: Array, idx: NDArray[np.intp]) -> tuple[Array, NDArray[np.bool_]]:
         qs, ok = six_axis_solutions(robot.dh, Ts[idx], red[:, 0], red[:, 1], q1[idx],
-                                    lower, upper, stretch, wrist_m)
+                                    lower[idx], upper[idx], stretch[idx], wrist_m[idx])
+        # the branch nearest the frame's own solution (branch labels swap where two branches
+        # meet, e.g. at full stretch, while the configuration stays continuous)
         k = np.arange(idx.size)
-        return qs[k, branch[idx]], ok[k, branch[idx]]
+        dev = np.abs(qs - q1[idx, None, :])[..., REVOLUTE].max(axis=2)
+        near = np.argmin(dev, axis=1)
+        # stay in a tube around the frame-by-frame solution: near the wrist singularity pan
+        # and roll swing wildly with track/extend, and the smoothing must not swing them
+        return qs[k, near], ok[k, near] & (dev[k, near] <= _SMOOTH_TUBE)
 
     def project(red: Array) -> Array:
         out = _corridor_project(robot.dh, wrist, red, lower, upper, stretch)
@@ -1092,4 +1202,18 @@ def smooth_redundancy(
     red = project(red)
     out, ok = solve(red, rows)
     out = np.where(ok[:, None], out, q1)
+    # where the smoothed path steps faster than the frame-by-frame one (and faster than the
+    # step bound), blend that stretch back towards the frame-by-frame path
+    limit = np.maximum(np.abs(np.diff(q1, axis=0)), max_step if max_step is not None else 0.0)
+    for _ in range(8 if max_step is not None else 0):
+        jumps = np.any(np.abs(np.diff(out, axis=0)) > 1.05 * limit + 1e-9, axis=1)
+        if not jumps.any():
+            break
+        mark = np.zeros(n)
+        mark[:-1][jumps] = 1.0
+        mark[1:][jumps] = 1.0
+        pull = np.minimum(3.0 * gaussian_filter1d(mark, max(sigma_frames / 2, 1.0)) + mark, 1.0)
+        red = red + pull[:, None] * (base - red)
+        out, ok = solve(red, rows)
+        out = np.where(ok[:, None], out, q1)
     return out, ok

@@ -428,8 +428,10 @@ def long_move(n_frames: int = 1440) -> Move:
     """A smooth, feasible combined move: track travel, crane, pan and tilt (Z-up, m).
 
     Frames 1..n_frames. Over the whole take (eased start and stop) the camera travels x 4 ->
-    9 m with a weave, y swings ±1.2 m, z cranes between 0.3 and 1.9 m, pan wanders -30° to
-    +45°, tilt -5° to -17° (lower when high); focal 35 -> 50 -> 35 mm, focus 2-4 m.
+    9 m with a weave, y swings ±1.2 m, z cranes between 0.2 and 1.2 m, pan wanders -30° to
+    +45°, tilt -5° to -17° (lower when high); focal 35 -> 50 -> 35 mm, focus 2-4 m. (A camera
+    high above the shoulder looking level is where this robot's wrist nears its singularity:
+    the elbow cannot hang the forearm below a raised arm.)
     """
     if n_frames < 2:
         msg = f"n_frames must be at least 2, not {n_frames}"
@@ -440,7 +442,7 @@ def long_move(n_frames: int = 1440) -> Move:
         [
             4.0 + 5.0 * u + 0.6 * np.sin(4.0 * np.pi * u),
             1.2 * np.sin(3.0 * np.pi * u),
-            1.1 - 0.8 * np.cos(4.0 * np.pi * u),
+            0.7 - 0.5 * np.cos(4.0 * np.pi * u),
         ],
         axis=1,
     )

@@ -1,0 +1,623 @@
+"""``make bench``: how fast and how good camtraj's IK and conversion are, on this machine.
+
+Prints plain tables of medians (and writes them to ``bench/results.json``); every speed figure
+comes with a ratio against a baseline measured in the same run:
+
+1. Sequential IK over a smooth one-minute path (1440 frames at 24 fps), objectives ``paper`` and
+   ``smooth``: frames/s against the issue's target (2000 frames/s) and against scipy SLSQP
+   warm-started frame by frame; for ``paper``, every frame's F against a dense traversal
+   seeded with the solver's previous frame; a cProfile of one run.
+2. Cold single-pose solves from home to random reachable poses and to the GA paper's case:
+   SM against generic SLSQP, the GA paper's GM method rebuilt, and a dense traversal
+   (``bench/ik_baselines.py``).
+3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage.
+4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
+
+Usage: ``python bench/run.py [--quick] [--json PATH]``. The full run takes a few minutes on two
+cores; ``--quick`` uses a shorter shot, fewer poses and one repeat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import datetime as dt
+import importlib.util
+import json
+import math
+import os
+import platform
+import pstats
+import statistics
+import sys
+import tempfile
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import scipy
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import ik_baselines as base  # noqa: E402  (bench/ is not a package)
+
+import camtraj  # noqa: E402
+from camtraj import ik  # noqa: E402
+from camtraj.errors import UnreachableError  # noqa: E402
+from camtraj.robot import Robot  # noqa: E402
+from camtraj.usd_shot import read_shot  # noqa: E402
+
+TARGET_FPS = 2000.0  # the issue's target for sequential IK [frames/s]
+TARGET_CONVERT_S = 2.0  # the issue's target for converting a one-minute shot [s]
+WITHIN = 1e-3  # "within 0.1 %" of the traversal
+FPS = 24.0
+
+
+def log(msg: str) -> None:
+    """Progress on stderr (the tables go to stdout)."""
+    print(f"  .. {msg}", file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Output helpers
+# ---------------------------------------------------------------------------------------------
+
+
+def table(
+    title: str, headers: list[str], rows: list[list[str]], notes: Sequence[str] = ()
+) -> None:
+    """Print a plain table: first column left-aligned, the rest right-aligned."""
+    cols = list(zip(headers, *rows, strict=True))
+    widths = [max(len(c) for c in col) for col in cols]
+
+    def line(cells: list[str]) -> str:
+        parts = [cells[0].ljust(widths[0])]
+        parts += [c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]
+        return "  ".join(parts).rstrip()
+
+    print()
+    print(title)
+    print(line(headers))
+    print("  ".join("-" * w for w in widths))
+    for row in rows:
+        print(line(row))
+    for note in notes:
+        print(f"  {note}")
+    sys.stdout.flush()
+
+
+def fmt(x: float, digits: int = 3) -> str:
+    """A number in a table cell: ``digits`` significant digits, no exponent for usual sizes."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    if math.isinf(x):
+        return "inf"
+    if x == 0:
+        return "0"
+    a = abs(x)
+    if a >= 10 ** digits or a < 1e-3:
+        return f"{x:.{max(digits - 1, 1)}e}"
+    decimals = max(digits - 1 - math.floor(math.log10(a)), 0)
+    return f"{x:.{decimals}f}"
+
+
+def ratio(a: float, b: float) -> float:
+    return a / b if b > 0 else math.nan
+
+
+def load_make_samples() -> ModuleType:
+    """``samples/shots/make_samples.py`` as a module.
+
+    Registered in ``sys.modules`` before it runs (its dataclasses need that), under the name
+    ``bench/bench_batch.py`` also loads it by, so both share one module object.
+    """
+    name = "camtraj_make_samples"
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, ROOT / "samples/shots/make_samples.py")
+    if spec is None or spec.loader is None:
+        msg = "cannot load samples/shots/make_samples.py"
+        raise ImportError(msg)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def machine_header() -> dict[str, Any]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for text_line in Path("/proc/cpuinfo").read_text().splitlines():
+            if text_line.startswith("model name"):
+                cpu = text_line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "date": dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "cores": os.cpu_count(),
+        "cpu": cpu,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "camtraj": getattr(camtraj, "__version__", "?"),
+        "platform": platform.platform(),
+        "load_avg_1min_at_start": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 1: sequential IK over the one-minute path
+# ---------------------------------------------------------------------------------------------
+
+
+def profile_summary(prof: cProfile.Profile, n_frames: int, top: int = 5) -> dict[str, Any]:
+    """Top functions by cumulative time below the entry wrappers, and by own time."""
+    stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
+    rows = []
+    for (file, lineno, func), (_cc, nc, tt, ct, _callers) in stats.items():
+        where = "builtin" if file == "~" else f"{Path(file).name}:{lineno}"
+        rows.append({"function": func, "where": where, "calls": nc, "own_s": tt, "cum_s": ct})
+    total = max(r["cum_s"] for r in rows)
+
+    # the entry chain (solve_path > solve_path_report > solve_ik > ...): called once per run or
+    # once per frame, holding nearly all the time; the work below it is what limits the speed
+    def is_wrapper(r: dict[str, Any]) -> bool:
+        return bool(r["cum_s"] >= 0.9 * total and r["calls"] in (1, n_frames))
+
+    wrappers = sorted((r for r in rows if is_wrapper(r)), key=lambda r: -r["cum_s"])
+    inner = sorted((r for r in rows if not is_wrapper(r)),
+                   key=lambda r: r["cum_s"], reverse=True)[:top]
+    own = sorted(rows, key=lambda r: r["own_s"], reverse=True)[:3]
+    for r in inner + own:
+        r["pct"] = 100.0 * r["cum_s"] / total
+        r["own_pct"] = 100.0 * r["own_s"] / total
+        r["calls_per_frame"] = r["calls"] / n_frames
+    return {"total_s": total, "wrappers": [r["function"] for r in wrappers],
+            "top_cumulative": inner, "top_own": own}
+
+
+def bench_sequential(robot: Robot, targets: np.ndarray, repeats: int, slsqp_frames: int,
+                     traverse_every: int) -> dict[str, Any]:
+    n = targets.shape[0]
+    out: dict[str, Any] = {"frames": n, "repeats": repeats}
+    reports: dict[str, ik.PathSolution] = {}
+    for obj in ("paper", "smooth"):
+        interval = 1.0 / FPS if obj == "smooth" else None
+        walls = []
+        for r in range(repeats):
+            log(f"table 1: solve_path objective={obj}, run {r + 1}/{repeats}")
+            t0 = time.perf_counter()
+            rep = ik.solve_path_report(robot, targets, robot.home, objective=obj,
+                                       frame_interval=interval)
+            walls.append(time.perf_counter() - t0)
+        reports[obj] = rep
+        wall = statistics.median(walls)
+        out[obj] = {
+            "wall_s": walls, "median_wall_s": wall, "fps": n / wall,
+            "sum_F": float(rep.cost.sum()),
+            "relaxed_margin_frames": int((~rep.within_margins).sum()),
+            "relaxed_step_frames": int((~rep.within_step).sum()),
+        }
+
+    # baseline: generic SLSQP warm-started frame by frame (paper objective), first frames only
+    m = min(slsqp_frames, n)
+    log(f"table 1: SLSQP warm-started over the first {m} frames")
+    t0 = time.perf_counter()
+    _, sl_cost, sl_failed = base.slsqp_path(robot, targets[:m], robot.home)
+    sl_wall = time.perf_counter() - t0
+    out["slsqp"] = {"frames": m, "wall_s": sl_wall, "fps": m / sl_wall,
+                    "failed_frames": sl_failed, "sum_F": float(sl_cost.sum()),
+                    "sm_sum_F_same_frames": float(reports["paper"].cost[:m].sum())}
+
+    # optimality: every (or every k-th) frame against a dense traversal from the same previous
+    rep = reports["paper"]
+    idx = np.arange(0, n, traverse_every)
+    log(f"table 1: dense traversal check of {idx.size} frames (paper objective)")
+    f_sm = rep.cost[idx]
+    f_tr = np.empty(idx.size)
+    t0 = time.perf_counter()
+    w_min = float(min(robot.weights[0], robot.weights[3]))
+    for j, i in enumerate(idx):
+        prev = robot.home if i == 0 else rep.q[i - 1]
+        radius = f_sm[j] / w_min * 1.001 + 1e-6
+        f_tr[j] = ik.traverse(robot, targets[i], prev, objective="paper", radius=radius,
+                              n1=41, n4=21, refine=3).cost
+    tr_wall = time.perf_counter() - t0
+    gap = f_sm - f_tr
+    rel = gap / np.maximum(f_tr, 1e-12)
+    within = f_sm <= f_tr * (1.0 + WITHIN) + 1e-9
+    k = int(np.argmax(rel))
+    out["check"] = {
+        "frames_checked": int(idx.size), "within_0.1pct": int(within.sum()),
+        "worst_rel_gap": float(rel[k]), "worst_abs_gap": float(gap[k]),
+        "worst_frame": int(idx[k]), "worst_F_solver": float(f_sm[k]),
+        "worst_F_traversal": float(f_tr[k]),
+        "solver_better_frames": int((gap < -1e-9).sum()),
+        "traversal_wall_s": tr_wall, "traversal_fps": idx.size / tr_wall,
+    }
+
+    log("table 1: cProfile of one paper run")
+    prof = cProfile.Profile()
+    prof.enable()
+    ik.solve_path(robot, targets, robot.home, objective="paper")
+    prof.disable()
+    out["profile"] = profile_summary(prof, n)
+    return out
+
+
+def print_sequential(res: dict[str, Any]) -> None:
+    n = res["frames"]
+    sl = res["slsqp"]
+    rows = []
+    for obj in ("paper", "smooth"):
+        r = res[obj]
+        rows.append([
+            obj, str(n), fmt(r["median_wall_s"]), fmt(r["fps"]),
+            fmt(r["fps"] / TARGET_FPS), fmt(ratio(r["fps"], sl["fps"])),
+            f"{r['relaxed_margin_frames']}/{r['relaxed_step_frames']}",
+        ])
+    rows.append([f"SLSQP warm (paper F, first {sl['frames']} frames)", str(sl["frames"]),
+                 fmt(sl["wall_s"]), fmt(sl["fps"]), fmt(sl["fps"] / TARGET_FPS), "1.00", "-"])
+    table(
+        f"1a. Sequential IK over {n} frames of the 1-minute path (24 fps; median of "
+        f"{res['repeats']} runs)",
+        ["method / objective", "frames", "median wall [s]", "frames/s",
+         "x target (2000 frames/s)", "x SLSQP warm (same run)", "relaxed margin/step frames"],
+        rows,
+        [f"SLSQP warm-started: {sl['failed_frames']} of {sl['frames']} frames missed the pose; "
+         f"its summed F over those frames {fmt(sl['sum_F'], 5)} vs SM "
+         f"{fmt(sl['sm_sum_F_same_frames'], 5)} "
+         f"(x{fmt(ratio(sl['sum_F'], sl['sm_sum_F_same_frames']), 4)}).",
+         "relaxed margin/step frames: frames where the smooth objective had to drop its "
+         "margins / its per-frame step bound."],
+    )
+    c = res["check"]
+    table(
+        "1b. Optimality of SM (paper objective) vs a dense traversal seeded with the solver's "
+        "previous frame (n1=41, n4=21, refine=3)",
+        ["frames checked", "within 0.1% of traversal F", "worst gap [% of F]",
+         "worst gap [F units]", "at frame (0-based)", "F solver / F traversal there",
+         "frames where SM < traversal"],
+        [[str(c["frames_checked"]), f"{c['within_0.1pct']}/{c['frames_checked']}",
+          fmt(100 * c["worst_rel_gap"]), fmt(c["worst_abs_gap"]), str(c["worst_frame"]),
+          f"{fmt(c['worst_F_solver'], 6)} / {fmt(c['worst_F_traversal'], 6)}",
+          str(c["solver_better_frames"])]],
+        [f"traversal speed (baseline, same run): {fmt(c['traversal_fps'])} frames/s; SM paper is "
+         f"x{fmt(ratio(res['paper']['fps'], c['traversal_fps']))} that."],
+    )
+    p = res["profile"]
+    rows = [[r["function"], r["where"], str(r["calls"]), fmt(r["calls_per_frame"]),
+             fmt(r["cum_s"]), fmt(r["pct"]), fmt(r["own_pct"])] for r in p["top_cumulative"]]
+    top, own = p["top_cumulative"][0], p["top_own"][0]
+    table(
+        f"1c. cProfile of one paper run ({fmt(p['total_s'])} s under the profiler's overhead): "
+        f"top 5 by "
+        f"cumulative time below the entry chain ({' > '.join(p['wrappers'])})",
+        ["function", "where", "calls", "calls per frame", "cumulative [s]", "cumulative [%]",
+         "own time [%]"],
+        rows,
+        [f"what limits it: {fmt(top['pct'])}% of the time is inside {top['function']} "
+         f"({top['calls']} calls, {fmt(top['calls_per_frame'])} per frame); the largest own "
+         f"time is {own['function']} ({own['where']}, {fmt(own['own_pct'])}%, "
+         f"{own['calls']} calls, {fmt(1e6 * own['own_s'] / max(own['calls'], 1))} us each)."],
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 2: cold single-pose solves
+# ---------------------------------------------------------------------------------------------
+
+
+def sm_cold(robot: Robot, target: np.ndarray, prev: np.ndarray) -> base.BaselineResult:
+    try:
+        sol = ik.solve_ik(robot, target, prev, objective="paper")
+    except UnreachableError as exc:
+        return base.BaselineResult(np.full(8, np.nan), math.inf, 0, False, str(exc))
+    return base.BaselineResult(sol.q, sol.cost, 0, True, "ok")
+
+
+METHODS: dict[str, Callable[[Robot, np.ndarray, np.ndarray], base.BaselineResult]] = {
+    "SM (solve_ik, paper)": sm_cold,
+    "generic SLSQP (8 axes)": base.slsqp_ik,
+    "GM rebuilt (DE + pattern search)": base.gm_ik,
+    "dense traversal (401x101, refine 2)": base.dense_ik,
+}
+
+
+def cold_poses(robot: Robot, n: int, seed: int = 0) -> list[tuple[str, np.ndarray]]:
+    """``n`` random reachable poses (FK inside limits shrunk by 2x the margin), then the GA
+    paper's target."""
+    rng = np.random.default_rng(seed)
+    m = 2.0 * robot.ik.limit_margin
+    qs = rng.uniform(robot.lower + m, robot.upper - m, size=(n, 8))
+    poses = [(f"random {i}", robot.fk(q)) for i, q in enumerate(qs)]
+    paper = np.eye(4)
+    paper[:3, 3] = (5.0, 1.5, 1.5)
+    poses.append(("GA paper case", paper))
+    return poses
+
+
+def bench_cold(robot: Robot, n_random: int) -> dict[str, Any]:
+    poses = cold_poses(robot, n_random)
+    prev = np.zeros(8)
+    # warm-up: first calls pay for lazy imports and caches
+    for fn in METHODS.values():
+        fn(robot, poses[0][1], prev)
+    times: dict[str, list[float]] = {name: [] for name in METHODS}
+    costs: dict[str, list[float]] = {name: [] for name in METHODS}
+    ok: dict[str, list[bool]] = {name: [] for name in METHODS}
+    msgs: dict[str, list[str]] = {name: [] for name in METHODS}
+    for k, (label, target) in enumerate(poses):
+        log(f"table 2: pose {k + 1}/{len(poses)} ({label})")
+        for name, fn in METHODS.items():
+            t0 = time.perf_counter()
+            res = fn(robot, target, prev)
+            times[name].append(time.perf_counter() - t0)
+            good = base.reaches(robot, res.q, target)
+            ok[name].append(good)
+            costs[name].append(res.cost if good else math.inf)
+            if not good:
+                msgs[name].append(f"{label}: {res.message}")
+    cost = np.array([costs[name] for name in METHODS])  # (methods, poses)
+    best = cost.min(axis=0)
+    out: dict[str, Any] = {"poses": len(poses), "methods": {}}
+    sm_median = statistics.median(times[next(iter(METHODS))])
+    for m_i, name in enumerate(METHODS):
+        reached = np.array(ok[name])
+        gaps = (cost[m_i] - best) / np.maximum(best, 1e-12)
+        gaps = gaps[reached & np.isfinite(best)]
+        med_t = statistics.median(times[name])
+        out["methods"][name] = {
+            "median_s": med_t, "solves_per_s": len(poses) / sum(times[name]),
+            "x_sm_time": med_t / sm_median,
+            "median_gap": float(np.median(gaps)) if gaps.size else math.nan,
+            "worst_gap": float(gaps.max()) if gaps.size else math.nan,
+            "success": int(reached.sum()), "failures": msgs[name][:5],
+            "paper_case_F": float(cost[m_i, -1]), "paper_case_s": times[name][-1],
+        }
+    return out
+
+
+def print_cold(res: dict[str, Any]) -> None:
+    n = res["poses"]
+    rows = []
+    for name, r in res["methods"].items():
+        rows.append([name, fmt(1e3 * r["median_s"]), fmt(r["solves_per_s"]), fmt(r["x_sm_time"]),
+                     fmt(100 * r["median_gap"]), fmt(100 * r["worst_gap"]),
+                     f"{r['success']}/{n}"])
+    notes = ["F gap = (F - best F any method found for that pose) / best F, over the poses the "
+             "method reached; reached = within 1e-6 m and 1e-6 rad and inside the limits."]
+    for name, r in res["methods"].items():
+        for f in r["failures"][:3]:
+            notes.append(f"{name} missed {f[:110]}")
+    table(
+        f"2a. Cold single-pose solves from home (zeros): {n - 1} random reachable poses + the "
+        "GA paper's case",
+        ["method", "median time/pose [ms]", "solves/s (poses / total time)",
+         "time x SM (median, same run)", "median F gap [%]", "worst F gap [%]", "reached"],
+        rows, notes,
+    )
+    rows = [[name, fmt(r["paper_case_F"], 7), fmt(1e3 * r["paper_case_s"])]
+            for name, r in res["methods"].items()]
+    table(
+        "2b. The GA paper's case: target (5, 1.5, 1.5) m, identity rotation, from zeros "
+        "(the paper's published best: F = 70283)",
+        ["method", "F [per-m/per-rad weights]", "time [ms]"], rows,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 3: end-to-end convert
+# ---------------------------------------------------------------------------------------------
+
+
+def bench_convert(shot: Path, repeats: int, work: Path) -> dict[str, Any]:
+    """Time ``convert`` with default options; if the default (film timing) is infeasible,
+    record why and time ``timing="scale"`` instead."""
+    if importlib.util.find_spec("camtraj.convert") is None:
+        return {"skipped": "convert not available (camtraj/convert.py does not exist yet)"}
+    try:
+        from camtraj.convert import ConvertOptions, convert
+        from camtraj.errors import InfeasibleError
+        options = ConvertOptions()
+    except Exception as exc:  # report whatever stops it, keep benchmarking
+        return {"skipped": f"convert not usable: {type(exc).__name__}: {exc}"}
+    walls: list[float] = []
+    stages: dict[str, list[float]] = {}
+    size = 0
+    default_error = None
+    r = 0
+    while r < repeats:
+        log(f"table 3: convert run {r + 1}/{repeats} (timing={options.timing})")
+        output = work / f"convert_{r}.mcap"
+        t0 = time.perf_counter()
+        try:
+            summary = convert(shot, output, options, progress=False)
+        except InfeasibleError as exc:
+            if default_error is not None:
+                return {"skipped": f"convert failed: {type(exc).__name__}: {exc}",
+                        "default_error": default_error}
+            default_error = f"{type(exc).__name__}: {exc}"
+            options = ConvertOptions(timing="scale")
+            continue
+        except Exception as exc:
+            return {"skipped": f"convert failed: {type(exc).__name__}: {exc}"}
+        walls.append(time.perf_counter() - t0)
+        for key, value in dict(summary.get("timings", {})).items():
+            stages.setdefault(key, []).append(float(value))
+        size = output.stat().st_size if output.exists() else 0
+        r += 1
+    # the stage split of the median run (medians of parts would not add up to the median)
+    mid = sorted(range(len(walls)), key=lambda i: walls[i])[len(walls) // 2]
+    return {"wall_s": walls, "median_wall_s": walls[mid],
+            "stages_s": {k: v[mid] for k, v in stages.items() if len(v) == len(walls)},
+            "stages_all_runs_s": stages,
+            "mcap_bytes": size, "repeats": repeats, "timing": options.timing,
+            "default_error": default_error}
+
+
+def print_convert(res: dict[str, Any], shot_seconds: float, bare_ik_s: float) -> None:
+    if "skipped" in res:
+        print(f"\n3. End-to-end convert: skipped: {res['skipped']}")
+        return
+    wall = res["median_wall_s"]
+    stages = {k: v for k, v in res["stages_s"].items() if k != "total"}
+    rows = [[k, fmt(v), fmt(100 * v / wall)] for k, v in stages.items()]
+    rest = wall - sum(stages.values())
+    rows.append(["(outside the stages)", fmt(rest), fmt(100 * rest / wall)])
+    rows.append(["total wall", fmt(wall), "100"])
+    ik_s = res["stages_s"].get("ik", math.nan)
+    dominant = max(stages, key=lambda k: stages[k]) if stages else "?"
+    table(
+        f"3. End-to-end convert of the 1-minute shot (timing={res['timing']}; the median of "
+        f"{res['repeats']} runs by wall time; MCAP {res['mcap_bytes'] / 1e6:.2f} MB)",
+        ["stage", "wall [s]", "share [%]"], rows,
+        [*([f"default options (timing=shot) FAILED, so timed with timing=scale: "
+            f"{res['default_error'][:300]}"] if res.get("default_error") else []),
+         f"total x target ({TARGET_CONVERT_S:g} s): {fmt(wall / TARGET_CONVERT_S)}; "
+         f"x real time ({shot_seconds:g} s shot): {fmt(shot_seconds / wall)} faster; "
+         f"dominant stage: {dominant}",
+         f"IK stage vs bare solve_path at table 1's smooth speed (same run, same frames): "
+         f"x{fmt(ratio(ik_s, bare_ik_s))}"],
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 4: batch
+# ---------------------------------------------------------------------------------------------
+
+
+def bench_batch(quick: bool, est_shot_s: float) -> dict[str, Any]:
+    path = HERE / "bench_batch.py"
+    if not path.is_file():
+        return {"skipped": "bench/bench_batch.py does not exist"}
+    if importlib.util.find_spec("camtraj.convert") is None:
+        return {"skipped": "camtraj batch needs camtraj/convert.py, which does not exist yet"}
+    if not (ROOT / "camtraj" / "cli.py").is_file() and not (ROOT / "camtraj/__main__.py").is_file():
+        return {"skipped": "camtraj batch needs the camtraj command line (camtraj/cli.py)"}
+    spec = importlib.util.spec_from_file_location("bench_batch", path)
+    if spec is None or spec.loader is None:
+        return {"skipped": "cannot load bench/bench_batch.py"}
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["bench_batch"] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:
+        return {"skipped": f"bench_batch.py does not import: {type(exc).__name__}: {exc}"}
+    if not hasattr(module, "run"):
+        return {"skipped": "bench/bench_batch.py has no run()"}
+    # size the batch to a time budget: jobs 1 + jobs 2 cost about 1.5 x the serial time
+    budget = 20.0 if quick else 40.0
+    frames = 120 if quick else 240
+    copies = int(max(4, min(20, budget / (1.5 * max(est_shot_s, 1e-3)))))
+    repeats = 1 if quick or copies * est_shot_s * 1.5 * 3 > budget else 3
+    log(f"table 4: bench_batch.run(copies={copies}, frames={frames}, repeats={repeats})")
+    try:
+        result = module.run(lambda s: log(f"table 4: {s}"), copies=copies, frames=frames,
+                            repeats=repeats)
+    except Exception as exc:
+        return {"skipped": f"bench_batch.run failed: {type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc(limit=3)}
+    return {"args": {"copies": copies, "frames": frames, "repeats": repeats},
+            "result": dict(result)}
+
+
+def print_batch(res: dict[str, Any]) -> None:
+    if "skipped" in res:
+        print(f"\n4. Batch: skipped: {res['skipped']}")
+        return
+    a = res["args"]
+    rows = []
+    for key, value in res["result"].items():
+        unit = "[s]" if key.endswith("_s") else "[x, jobs-1 time / jobs-2 time]" if (
+            key.startswith("speedup")) else ""
+        rows.append([f"{key} {unit}".strip(), fmt(float(value))])
+    notes = ["meanings: see the docstring of bench/bench_batch.py"]
+    if float(res["result"].get("long_shot_feasible", 1.0)) == 0.0:
+        notes.insert(0, f"the {a['frames']}-frame long shot is infeasible under --timing shot, so "
+                        "bench_batch.py batched copies of blender_crane_up.usda (96 frames)")
+    failed = float(res["result"].get("failed_shots", 0.0))
+    if failed:
+        runs = a["copies"] * a["repeats"] * 2
+        notes.insert(0, f"WARNING: {failed:g} of {runs} shot conversions FAILED, so these times "
+                        "are of failing conversions (see table 3 for why the default fails)")
+    table(
+        f"4. Batch (bench/bench_batch.py run(copies={a['copies']}, frames={a['frames']}, "
+        f"repeats={a['repeats']}); its medians",
+        ["figure", "value"], rows, notes,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true",
+                        help="shorter shot, fewer poses, one repeat (about a minute)")
+    parser.add_argument("--json", type=Path, default=HERE / "results.json",
+                        help="where to write the numbers (default: bench/results.json)")
+    args = parser.parse_args(argv)
+    quick: bool = args.quick
+    t_start = time.perf_counter()
+
+    head = machine_header()
+    head["mode"] = "quick" if quick else "full"
+    print(f"camtraj bench ({head['mode']})  {head['date']}")
+    print(f"machine: {head['cores']} cores, {head['cpu']}; Python {head['python']}, "
+          f"numpy {head['numpy']}, scipy {head['scipy']}; {head['platform']}")
+    print(f"load average (1 min) at start: {head['load_avg_1min_at_start']} "
+          "(above 0 means other work shares the cores: timings are then noisier)")
+    sys.stdout.flush()
+
+    robot = Robot.default()
+    n_frames = 1440  # long_move spreads one move over the frames: fewer frames = faster move
+    results: dict[str, Any] = {"machine": head}
+    with tempfile.TemporaryDirectory(prefix="camtraj-bench-") as tmp:
+        work = Path(tmp)
+        shot = work / "long_shot.usda"
+        load_make_samples().write_long_shot(shot, n_frames=n_frames, fps=FPS)
+        cam2worlds = read_shot(shot).cam2world
+        targets = cam2worlds @ np.linalg.inv(robot.camera2flange)
+        print(f"shot: write_long_shot, {targets.shape[0]} frames at {FPS:g} fps "
+              f"({targets.shape[0] / FPS:g} s); robot: {robot.name}")
+
+        seq_targets = targets[:360] if quick else targets
+        seq = bench_sequential(robot, seq_targets, repeats=1 if quick else 3,
+                               slsqp_frames=48 if quick else 72, traverse_every=1)
+        results["sequential_ik"] = seq
+        print_sequential(seq)
+
+        cold = bench_cold(robot, n_random=8 if quick else 30)
+        results["cold_solves"] = cold
+        print_cold(cold)
+
+        conv = bench_convert(shot, repeats=1 if quick else 3, work=work)
+        results["convert"] = conv
+        bare_ik = seq["smooth"]["median_wall_s"] * targets.shape[0] / seq_targets.shape[0]
+        print_convert(conv, targets.shape[0] / FPS, bare_ik)
+
+    est_shot = 240.0 / seq["smooth"]["fps"] + 0.5
+    batch = bench_batch(quick, est_shot)
+    results["batch"] = batch
+    print_batch(batch)
+
+    total = time.perf_counter() - t_start
+    results["bench_wall_s"] = total
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    results["load_avg_1min_at_end"] = load
+    print(f"\nbench wall time: {total:.0f} s; load average (1 min) at end: {load:.2f}; "
+          f"numbers in {args.json}")
+    args.json.write_text(json.dumps(results, indent=2, default=float) + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,853 @@
+"""Convert many shots at once: ``camtraj batch SHOTS... -o OUTDIR``.
+
+Each shot is converted by :func:`camtraj.convert.convert` in a worker process (one process per
+job slot, reused from shot to shot), so a batch on N cores takes about 1/N of the time of
+converting the shots one after the other. A shot that fails does not stop the others.
+
+Outputs, for a shot ``path/to/NAME.usda``:
+
+- ``OUTDIR/NAME.mcap``: the move, written atomically by ``convert`` (byte-identical to what
+  ``camtraj convert path/to/NAME.usda -o OUTDIR/NAME.mcap`` writes).
+- ``OUTDIR/NAME.summary.json``: the summary ``convert`` returns, plus the convert options used
+  (``convert_options``).
+- ``OUTDIR/batch_report.json``: one entry per shot (status ``ok``, ``failed`` or ``skipped``,
+  reason, frames, max speed, time), and the batch's exit code.
+
+A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
+set file, and whose summary records the same convert options, is skipped (make-style) unless
+``--force``. A shot that fails loses any MCAP and
+summary left from an earlier run, so nothing in OUTDIR looks like a current result when it is
+not.
+
+Exit codes (design.md §5): 0 when every shot converted or was skipped; 2 when any failed shot
+was bad input (or the batch itself was: duplicate output names, bad options); 3 when every
+failed shot was infeasible (unreachable frames, limits exceeded); 1 when a shot failed for an
+unexpected reason (a bug) and none was bad input.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import dataclasses
+import json
+import math
+import multiprocessing
+import os
+import secrets
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
+
+import click
+
+from camtraj import __version__
+from camtraj.errors import CamtrajError, InputError
+
+if TYPE_CHECKING:
+    from camtraj.convert import ConvertOptions
+
+__all__ = [
+    "REPORT_NAME",
+    "SHOT_SUFFIXES",
+    "BatchReport",
+    "ShotResult",
+    "batch_command",
+    "build_options",
+    "convert_options",
+    "more_convert_options",
+    "option_values",
+    "options_from_json",
+    "options_to_args",
+    "options_to_json",
+    "output_names",
+    "run_batch",
+    "start_workers_early",
+    "write_json_atomic",
+    "write_text_atomic",
+]
+
+OPTIONS_KEY = "convert_options"
+"""Key under which a batch records the convert options in each shot's summary JSON."""
+
+REPORT_NAME = "batch_report.json"
+"""File name of the batch report inside OUTDIR."""
+
+SHOT_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+"""File name endings of USD shots."""
+
+TIMING_MODES = ("shot", "scale", "optimal")
+OBJECTIVES = ("smooth", "paper")
+REASON_WIDTH = 72  # characters of a failure reason shown in the table (all of it is in the JSON)
+
+Status = Literal["ok", "failed", "skipped"]
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+# --------------------------------------------------------------------------------------------
+# Convert options shared by `batch` and `farm export`.
+# --------------------------------------------------------------------------------------------
+
+
+def _parse_placement(text: str) -> tuple[float, float, float, float]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        msg = f"placement must be x,y,z,yaw_deg (4 numbers), got {text!r}"
+        raise InputError(msg)
+    return (values[0], values[1], values[2], values[3])
+
+
+def _parse_frames(text: str) -> tuple[int, int]:
+    first, sep, last = text.partition(":")
+    try:
+        frames = (int(first), int(last))
+    except ValueError:
+        sep = ""
+    if not sep:
+        msg = f"frames must be A:B (two whole frame numbers), got {text!r}"
+        raise InputError(msg)
+    if frames[1] < frames[0]:
+        msg = f"frames {text!r}: the last frame is before the first"
+        raise InputError(msg)
+    return frames
+
+
+def _parse_start_from(text: str) -> tuple[float, ...]:
+    """``--start-from``: 8 joint values, metres for track/extend, degrees for the rest -> SI."""
+    from camtraj.robot import REVOLUTE
+
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != len(REVOLUTE) or not all(math.isfinite(v) for v in values):
+        msg = (
+            f"--start-from needs {len(REVOLUTE)} numbers (m for track/extend, deg for the rest), "
+            f"got {text!r}"
+        )
+        raise InputError(msg)
+    return tuple(math.radians(v) if REVOLUTE[i] else v for i, v in enumerate(values))
+
+
+def _format_start_from(values: Sequence[float]) -> str:
+    from camtraj.robot import REVOLUTE
+
+    return ",".join(
+        repr(math.degrees(v) if REVOLUTE[i] else float(v)) for i, v in enumerate(values)
+    )
+
+
+def convert_options(func: F) -> F:
+    """Click decorator adding the options of ``camtraj convert`` that a batch or a job passes on.
+
+    Adds ``--camera``, ``--robot``, ``--placement``, ``--frames``, ``--rate`` and ``--timing``;
+    turn their values into :class:`camtraj.convert.ConvertOptions` with :func:`build_options`.
+    """
+    decorators = [
+        click.option(
+            "--camera", metavar="PRIM", help="Camera prim path (default: the only camera)."
+        ),
+        click.option(
+            "--robot",
+            type=click.Path(exists=True, dir_okay=False),
+            metavar="ROBOT.toml",
+            help="Robot description file (default: the built-in robot).",
+        ),
+        click.option(
+            "--placement",
+            metavar="X,Y,Z,YAW_DEG",
+            help="Stage-to-robot placement: translation [m] and yaw [deg].",
+        ),
+        click.option("--frames", metavar="A:B", help="Film frame range to convert (inclusive)."),
+        click.option(
+            "--rate",
+            type=click.FloatRange(min=0.0, min_open=True),
+            default=250.0,
+            show_default=True,
+            help="Servo rate [Hz].",
+        ),
+        click.option(
+            "--timing",
+            type=click.Choice(TIMING_MODES),
+            default="shot",
+            show_default=True,
+            help="Keep the shot's timing, scale it to fit the limits, or retime optimally.",
+        ),
+    ]
+    for decorator in reversed(decorators):
+        func = decorator(func)
+    return func
+
+
+def more_convert_options(func: F) -> F:
+    """Click decorator adding ``--set-file``, ``--start-from`` and ``--objective``.
+
+    The less common convert options; pass their values to :func:`build_options` too.
+    """
+    decorators = [
+        click.option(
+            "--set-file",
+            type=click.Path(exists=True, dir_okay=False),
+            metavar="SET.toml",
+            help="A TOML file whose [placement] table places the robot; --placement wins.",
+        ),
+        click.option(
+            "--start-from",
+            metavar="Q1,...,Q8",
+            help="Joint values the robot starts from (m for track/extend, deg for the rest).",
+        ),
+        click.option(
+            "--objective",
+            type=click.Choice(OBJECTIVES),
+            help="IK objective (default: the robot file's).",
+        ),
+    ]
+    for decorator in reversed(decorators):
+        func = decorator(func)
+    return func
+
+
+def build_options(
+    *,
+    camera: str | None,
+    robot: str | None,
+    placement: str | None,
+    frames: str | None,
+    rate: float,
+    timing: str,
+    set_file: str | None = None,
+    start_from: str | None = None,
+    objective: str | None = None,
+) -> ConvertOptions:
+    """Build convert options from the command-line strings of the option decorators.
+
+    Raises:
+        InputError: A malformed ``placement``, ``frames`` or ``start_from``, or a value that
+            :class:`~camtraj.convert.ConvertOptions` refuses.
+    """
+    from camtraj.convert import ConvertOptions
+
+    return ConvertOptions(
+        camera=camera,
+        robot=robot,
+        placement=_parse_placement(placement) if placement is not None else None,
+        set_file=set_file,
+        frames=_parse_frames(frames) if frames is not None else None,
+        rate=float(rate),
+        timing=timing,
+        start_from=_parse_start_from(start_from) if start_from is not None else None,
+        objective=objective,
+    )
+
+
+def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
+    """``(flag, value)`` of every ``camtraj convert`` option that reproduces ``options``.
+
+    ``--rate`` and ``--timing`` always; the others when set. Values are command-line text
+    (placement and start-from in metres and degrees).
+    """
+    pairs: list[tuple[str, str]] = []
+    if options.camera is not None:
+        pairs.append(("--camera", options.camera))
+    if options.robot is not None:
+        pairs.append(("--robot", str(options.robot)))
+    if options.placement is not None:
+        pairs.append(("--placement", ",".join(repr(float(v)) for v in options.placement)))
+    if options.set_file is not None:
+        pairs.append(("--set-file", str(options.set_file)))
+    if options.frames is not None:
+        pairs.append(("--frames", f"{options.frames[0]}:{options.frames[1]}"))
+    pairs.append(("--rate", repr(float(options.rate))))
+    pairs.append(("--timing", options.timing))
+    if options.start_from is not None:
+        pairs.append(("--start-from", _format_start_from(options.start_from)))
+    if options.objective is not None:
+        pairs.append(("--objective", options.objective))
+    return pairs
+
+
+def options_to_args(options: ConvertOptions) -> list[str]:
+    """The ``camtraj convert`` arguments that reproduce ``options``.
+
+    Returns:
+        Arguments, one list item per argv word (not shell-quoted).
+    """
+    return [word for pair in option_values(options) for word in pair]
+
+
+def options_to_json(options: ConvertOptions) -> dict[str, Any]:
+    """Convert options as a JSON-able dict (tuples become lists)."""
+    return {
+        f.name: list(value) if isinstance(value, tuple) else value
+        for f in dataclasses.fields(options)
+        for value in [getattr(options, f.name)]
+    }
+
+
+def options_from_json(data: dict[str, Any]) -> ConvertOptions:
+    """Inverse of :func:`options_to_json`.
+
+    Raises:
+        InputError: ``data`` names an option that this camtraj does not have.
+    """
+    from camtraj.convert import ConvertOptions
+
+    known = {f.name for f in dataclasses.fields(ConvertOptions)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        msg = f"unknown convert option(s) {unknown}; this camtraj knows {sorted(known)}"
+        raise InputError(msg)
+    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+    return ConvertOptions(**values)
+
+
+# --------------------------------------------------------------------------------------------
+# Small file helpers.
+# --------------------------------------------------------------------------------------------
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    # Mode 0o666 less the umask, like any new file (mkstemp would make it private).
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write ``data`` as indented JSON (with a final newline) to ``path`` atomically."""
+    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+
+
+def output_names(shots: Sequence[str], outdir: Path) -> list[tuple[Path, Path]]:
+    """The MCAP and summary paths of each shot: ``OUTDIR/<stem>.mcap``, ``<stem>.summary.json``.
+
+    Raises:
+        InputError: A shot is not a USD file, or two shots share a stem (they would write the
+            same outputs; stems are compared ignoring case, as some file systems do).
+    """
+    seen: dict[str, str] = {}
+    names: list[tuple[Path, Path]] = []
+    for shot in shots:
+        path = Path(shot)
+        if path.suffix.lower() not in SHOT_SUFFIXES:
+            msg = f"{shot}: not a USD shot (expected one of {', '.join(SHOT_SUFFIXES)})"
+            raise InputError(msg)
+        key = path.stem.casefold()
+        if key in seen:
+            msg = (
+                f"{seen[key]} and {shot} would both write {outdir / path.stem}.mcap; "
+                "rename one of them or convert them in separate batches"
+            )
+            raise InputError(msg)
+        seen[key] = shot
+        names.append((outdir / f"{path.stem}.mcap", outdir / f"{path.stem}.summary.json"))
+    return names
+
+
+def _mtime_ns(path: Path) -> int | None:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return None
+
+
+def _up_to_date(outputs: Iterable[Path], inputs: Iterable[Path]) -> bool:
+    """Make's rule: every output exists and is at least as new as every input."""
+    out_times = [_mtime_ns(p) for p in outputs]
+    if any(t is None for t in out_times):
+        return False
+    oldest_out = min(t for t in out_times if t is not None)
+    for path in inputs:
+        t = _mtime_ns(path)
+        if t is None or t > oldest_out:
+            return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# The batch.
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ShotResult:
+    """What happened to one shot of a batch.
+
+    Attributes:
+        shot: The shot path as given.
+        output: The MCAP path.
+        summary_path: The summary JSON path.
+        status: ``ok`` (converted now), ``failed`` or ``skipped`` (up to date).
+        reason: Why it failed or was skipped, else ``None``.
+        exit_code: ``camtraj convert``'s exit code for this shot (0 for ok and skipped).
+        error: The error class name when it failed, else ``None``.
+        seconds: Conversion wall time in [s] (0 when skipped).
+        cpu_seconds: CPU time of the conversion in [s] (0 when skipped).
+        summary: The convert summary (read back from the summary file when skipped).
+    """
+
+    shot: str
+    output: str
+    summary_path: str
+    status: Status
+    reason: str | None = None
+    exit_code: int = 0
+    error: str | None = None
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """This result as a JSON-able dict."""
+        return {
+            "shot": self.shot,
+            "output": self.output,
+            "summary_path": self.summary_path,
+            "status": self.status,
+            "reason": self.reason,
+            "exit_code": self.exit_code,
+            "error": self.error,
+            "frames": self.summary.get("frames"),
+            "max_speed": self.summary.get("max_speed"),
+            "duration": self.summary.get("duration"),
+            "seconds": round(self.seconds, 3),
+            "cpu_seconds": round(self.cpu_seconds, 3),
+        }
+
+
+@dataclass(frozen=True)
+class BatchReport:
+    """The outcome of :func:`run_batch`.
+
+    Attributes:
+        outdir: The output folder.
+        jobs: Worker processes used.
+        wall_seconds: Wall time of the whole batch in [s].
+        results: One result per shot, in the order the shots were given.
+        options: The convert options, JSON-able.
+    """
+
+    outdir: str
+    jobs: int
+    wall_seconds: float
+    results: tuple[ShotResult, ...]
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> tuple[ShotResult, ...]:
+        """The results of the shots that failed."""
+        return tuple(r for r in self.results if r.status == "failed")
+
+    @property
+    def exit_code(self) -> int:
+        """0 if nothing failed; 2 if any failure was bad input; 3 if all were infeasible; else 1."""
+        codes = {r.exit_code for r in self.failed}
+        if not codes:
+            return 0
+        if 2 in codes:
+            return 2
+        if codes == {3}:
+            return 3
+        return 1
+
+    def to_json(self) -> dict[str, Any]:
+        """The report as written to ``OUTDIR/batch_report.json``."""
+        counts = {s: sum(r.status == s for r in self.results) for s in ("ok", "failed", "skipped")}
+        return {
+            "camtraj_version": __version__,
+            "outdir": self.outdir,
+            "jobs": self.jobs,
+            "options": self.options,
+            "wall_seconds": round(self.wall_seconds, 3),
+            "counts": counts,
+            "exit_code": self.exit_code,
+            "shots": [r.to_json() for r in self.results],
+        }
+
+    def table(self) -> str:
+        """A plain-text table: shot, frames, status, max feasible speed, time."""
+        header = ("shot", "frames", "status", "max speed", "time")
+        rows = [header]
+        for r in self.results:
+            status: str = r.status
+            if r.status == "failed" and r.reason:
+                reason = r.reason.splitlines()[0]
+                if len(reason) > REASON_WIDTH:
+                    reason = reason[: REASON_WIDTH - 3].rstrip() + "..."
+                status = f"failed: {reason}"
+            time_text = f"{r.seconds:.1f} s" if r.status != "skipped" else "-"
+            rows.append(
+                (
+                    Path(r.shot).name,
+                    _format_frames(r.summary.get("frames")),
+                    status,
+                    _format_speed(r.summary.get("max_speed")),
+                    time_text,
+                )
+            )
+        widths = [max(len(row[i]) for row in rows) for i in range(len(header) - 1)]
+        lines = []
+        for row in rows:
+            cells = [cell.ljust(w) for cell, w in zip(row[:-1], widths, strict=True)]
+            lines.append("  ".join([*cells, row[-1]]).rstrip())
+        counts = self.to_json()["counts"]
+        lines.append(
+            f"{counts['ok']} converted, {counts['skipped']} up to date, {counts['failed']} failed"
+            f" in {self.wall_seconds:.1f} s with {self.jobs} job(s)"
+        )
+        return "\n".join(lines)
+
+
+def _format_frames(frames: Any) -> str:
+    if frames is None:
+        return "-"
+    if isinstance(frames, dict):
+        first, last = frames.get("first"), frames.get("last")
+        count = frames.get("count")
+        if first is not None and last is not None:
+            return f"{first}-{last}"
+        return str(count) if count is not None else "-"
+    if isinstance(frames, list | tuple) and len(frames) == 2:
+        return f"{frames[0]}-{frames[1]}"
+    return str(frames)
+
+
+def _format_speed(speed: Any) -> str:
+    if speed is None:
+        return "-"
+    if isinstance(speed, int | float):
+        return f"{speed:.3g}x" if math.isfinite(speed) else "-"
+    return str(speed)
+
+
+def _convert_one(
+    shot: str, output: str, summary_path: str, options: ConvertOptions
+) -> dict[str, Any]:
+    """Worker: convert one shot; never raises (the outcome comes back as a plain dict)."""
+    start = time.perf_counter()
+    cpu_start = time.process_time()
+    try:
+        from camtraj.convert import convert
+
+        summary = convert(shot, output, options, progress=False)
+        # Recorded so that a later batch with other options does not skip this shot.
+        write_json_atomic(Path(summary_path), {**summary, OPTIONS_KEY: options_to_json(options)})
+    except CamtrajError as exc:
+        outcome: dict[str, Any] = {
+            "status": "failed",
+            "reason": str(exc) or type(exc).__name__,
+            "exit_code": exc.exit_code,
+            "error": type(exc).__name__,
+        }
+    except Exception as exc:  # a bug: report it as this shot's failure and go on
+        outcome = {
+            "status": "failed",
+            "reason": f"internal error: {type(exc).__name__}: {exc}",
+            "exit_code": 1,
+            "error": type(exc).__name__,
+        }
+    else:
+        outcome = {"status": "ok", "summary": summary}
+    if outcome["status"] == "failed":
+        # A failed shot must not leave an older result that looks current.
+        Path(output).unlink(missing_ok=True)
+        Path(summary_path).unlink(missing_ok=True)
+    outcome["seconds"] = time.perf_counter() - start
+    outcome["cpu_seconds"] = time.process_time() - cpu_start
+    return outcome
+
+
+def _warm_up() -> None:
+    """Worker initializer: import the pipeline once per worker, not once per shot."""
+    import camtraj.convert  # noqa: F401
+
+
+_ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+"""Worker environment: one BLAS thread per worker, as the workers already use every core."""
+
+
+@contextlib.contextmanager
+def _worker_environment() -> Iterator[None]:
+    """Set :data:`_ONE_THREAD` (where the user has not) while worker processes are started."""
+    added = [k for k in _ONE_THREAD if k not in os.environ]
+    os.environ.update({k: _ONE_THREAD[k] for k in added})
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
+
+
+def _mp_context() -> multiprocessing.context.BaseContext:
+    # forkserver: workers fork from a clean, pre-imported server (fast and thread-safe);
+    # spawn where there is no forkserver (Windows).
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["camtraj.convert"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def start_workers_early() -> None:
+    """Start the worker fork server now, so that it imports the pipeline while this process does.
+
+    Optional: :func:`run_batch` starts it anyway. Calling this before the first import of
+    :mod:`camtraj.convert` overlaps the two imports (about a second each) on two cores.
+    """
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return
+    from multiprocessing import forkserver
+
+    _mp_context()
+    with _worker_environment():
+        forkserver.ensure_running()
+
+
+def _read_summary(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any]]) -> ShotResult:
+    try:
+        outcome = future.result()
+    except Exception as exc:  # the worker process died (crash, out of memory)
+        outcome = {
+            "status": "failed",
+            "reason": f"worker died: {type(exc).__name__}: {exc}",
+            "exit_code": 1,
+            "error": type(exc).__name__,
+            "seconds": 0.0,
+        }
+    return ShotResult(
+        shot,
+        str(names[0]),
+        str(names[1]),
+        status=outcome["status"],
+        reason=outcome.get("reason"),
+        exit_code=outcome.get("exit_code", 0),
+        error=outcome.get("error"),
+        seconds=outcome["seconds"],
+        cpu_seconds=outcome.get("cpu_seconds", 0.0),
+        summary=outcome.get("summary", {}),
+    )
+
+
+def run_batch(
+    shots: Sequence[str],
+    outdir: str | os.PathLike[str],
+    *,
+    jobs: int | None = None,
+    force: bool = False,
+    options: ConvertOptions,
+    progress: bool = False,
+) -> BatchReport:
+    """Convert ``shots`` into ``outdir`` in parallel and write ``outdir/batch_report.json``.
+
+    Args:
+        shots: USD shot paths. Their stems must be distinct.
+        outdir: Output folder, created if missing.
+        jobs: Worker processes (default: the CPUs this process may use); at most one per shot.
+        force: Convert every shot even if its outputs are up to date.
+        options: Convert options, the same for every shot.
+        progress: Show one overall tqdm progress bar on stderr.
+
+    Returns:
+        The report. Failed shots are in it; they do not raise.
+
+    Raises:
+        InputError: Before anything runs: no shots, duplicate stems, bad ``jobs``.
+    """
+    start = time.perf_counter()
+    if not shots:
+        msg = "no shots given"
+        raise InputError(msg)
+    out = Path(outdir)
+    names = output_names(shots, out)
+    if jobs is None:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        jobs = jobs or 1
+    if jobs < 1:
+        msg = f"jobs must be at least 1, got {jobs}"
+        raise InputError(msg)
+    out.mkdir(parents=True, exist_ok=True)
+
+    extra_inputs = [Path(p) for p in (options.robot, options.set_file) if p is not None]
+    wanted = json.loads(json.dumps(options_to_json(options)))  # as read back from a summary
+    results: list[ShotResult | None] = [None] * len(shots)
+    todo: list[int] = []
+    for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):
+        if not Path(shot).is_file():
+            results[i] = ShotResult(
+                shot,
+                str(mcap),
+                str(summary),
+                status="failed",
+                reason="no such file",
+                exit_code=2,
+                error="ShotFileError",
+            )
+            Path(mcap).unlink(missing_ok=True)
+            Path(summary).unlink(missing_ok=True)
+            continue
+        inputs = [Path(shot), *extra_inputs]
+        if not force and _up_to_date([mcap, summary], inputs):
+            previous = _read_summary(summary)
+            if previous.get(OPTIONS_KEY) == wanted:
+                results[i] = ShotResult(
+                    shot,
+                    str(mcap),
+                    str(summary),
+                    status="skipped",
+                    reason="up to date",
+                    summary=previous,
+                )
+                continue
+        todo.append(i)
+
+    workers = max(1, min(jobs, len(todo)))
+    if todo:
+        from tqdm import tqdm
+
+        with (
+            cf.ProcessPoolExecutor(
+                max_workers=workers, mp_context=_mp_context(), initializer=_warm_up
+            ) as pool,
+            tqdm(
+                total=len(todo),
+                unit="shot",
+                desc="camtraj batch",
+                disable=not progress,
+                file=sys.stderr,
+                dynamic_ncols=True,
+            ) as bar,
+        ):
+            with _worker_environment():  # workers (and the forkserver) start on submit
+                futures = {
+                    pool.submit(
+                        _convert_one, shots[i], str(names[i][0]), str(names[i][1]), options
+                    ): i
+                    for i in todo
+                }
+            try:
+                for future in cf.as_completed(futures):
+                    i = futures[future]
+                    result = _result(shots[i], names[i], future)
+                    results[i] = result
+                    bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
+                    bar.update(1)
+            except KeyboardInterrupt:
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+
+    report = BatchReport(
+        outdir=str(out),
+        jobs=workers,
+        wall_seconds=time.perf_counter() - start,
+        results=tuple(r for r in results if r is not None),
+        options=options_to_json(options),
+    )
+    write_json_atomic(out / REPORT_NAME, report.to_json())
+    return report
+
+
+# --------------------------------------------------------------------------------------------
+# The command.
+# --------------------------------------------------------------------------------------------
+
+
+@click.command(
+    "batch",
+    epilog=(
+        "Exit codes: 0 all shots converted or up to date; 2 a shot (or the batch) was bad "
+        "input; 3 every failed shot was infeasible; 1 an unexpected error."
+    ),
+)
+@click.argument("shots", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option(
+    "-o",
+    "--outdir",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Folder for NAME.mcap, NAME.summary.json and batch_report.json.",
+)
+@click.option(
+    "-j",
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Shots converted at once (default: the number of CPUs).",
+)
+@click.option("--force", is_flag=True, help="Reconvert shots whose outputs are up to date.")
+@convert_options
+@more_convert_options
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.pass_context
+def batch_command(
+    ctx: click.Context,
+    shots: tuple[str, ...],
+    outdir: str,
+    jobs: int | None,
+    force: bool,
+    camera: str | None,
+    robot: str | None,
+    placement: str | None,
+    frames: str | None,
+    rate: float,
+    timing: str,
+    set_file: str | None,
+    start_from: str | None,
+    objective: str | None,
+    quiet: bool,
+) -> None:
+    """Convert many SHOTS in parallel into OUTDIR, skipping shots that are up to date.
+
+    Prints a table (shot, frames, status, max feasible speed, time) and writes
+    OUTDIR/batch_report.json. Failed shots do not stop the others.
+    """
+    start_workers_early()
+    try:
+        options = build_options(
+            camera=camera,
+            robot=robot,
+            placement=placement,
+            frames=frames,
+            rate=rate,
+            timing=timing,
+            set_file=set_file,
+            start_from=start_from,
+            objective=objective,
+        )
+        report = run_batch(
+            shots,
+            outdir,
+            jobs=jobs,
+            force=force,
+            options=options,
+            progress=not quiet and sys.stderr.isatty(),
+        )
+    except CamtrajError as exc:
+        click.echo(f"ERROR: {exc}", err=True)
+        ctx.exit(exc.exit_code)
+    click.echo(report.table())
+    for r in report.failed:
+        click.echo(f"ERROR: {r.shot}: {r.reason}", err=True)
+    ctx.exit(report.exit_code)

@@ -1,0 +1,665 @@
+"""Render-farm jobs: ``camtraj farm export`` and ``camtraj farm run-task``.
+
+One farm task converts one shot. Two job formats:
+
+**Open Job Description** (``--format openjd``; the format behind AWS Deadline Cloud; runs
+locally with ``openjd run JOB.yaml``). One step, ``Convert``, whose tasks are the shots: the
+task parameters ``Shot``, ``Output`` and ``Summary`` are zipped (``combination: "(Shot,
+Output, Summary)"``), and each task runs ``camtraj convert SHOT -o OUTPUT --summary SUMMARY``
+plus the convert options. OpenJD passes each argument as one argv word (no shell), and every
+value the user chose (paths, camera prim, ...) travels as a parameter *value*, never as template
+text, so spaces, quotes and braces in names are safe. The convert options are job parameters
+(``Timing``, ``Rate``, and ``Camera``, ``Robot``, ``Placement``, ``Frames`` when given) whose
+defaults are the exported values (likewise ``SetFile``, ``StartFrom``, ``Objective``), so they
+can be changed at submission; ``CamtrajCommand`` is the
+camtraj executable on the render hosts. YAML, or JSON when the job file ends in ``.json``.
+
+**OpenCue** (``--format opencue``): a job spec XML (``cjsl`` DTD) built with opencue-pyoutline
+(an ``Outline`` with one ``Shell`` layer, serialised *without* the pycuerun wrapper, so render
+hosts need only camtraj) and a task manifest ``JOB.tasks.json`` beside it. The layer has frame
+range ``1-N`` and chunk 1; frame *i* is the *i*-th shot. Its command is the same for every frame,
+as OpenCue requires::
+
+    camtraj farm run-task /abs/path/JOB.tasks.json #IFRAME#
+
+Cuebot replaces ``#IFRAME#`` with the frame number and RQD runs the line through a shell;
+``run-task`` reads the manifest and converts entry *i*. The manifest (not the command line)
+carries the shot list, so names need no shell quoting beyond the manifest path itself
+(``shlex.quote``), and a job of many shots stays within Cuebot's 4000-character command limit.
+
+**Paths** are absolute by default. With ``--relative-paths`` they are relative to the job file's
+folder: in OpenJD through the ``JobDir`` PATH parameter (default ``.``, which OpenJD resolves
+against the template's folder at submission, so the folder can move or be path-mapped); in
+OpenCue, the manifest's entries are relative to the manifest, the command names the manifest
+relative to ``$CAMTRAJ_JOB_DIR``, and the job environment sets ``CAMTRAJ_JOB_DIR`` to the job
+folder at export: the one place that names an absolute location.
+
+Every job states the camtraj version that made it (OpenJD: ``description`` and a header comment;
+OpenCue: the ``CAMTRAJ_JOB_VERSION`` job environment variable, a comment and the manifest).
+
+The farm formats need the ``farm`` extra: ``pip install 'camtraj[farm]'``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import sys
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+from xml.etree import ElementTree as ET
+
+import click
+
+from camtraj import __version__
+from camtraj.batch import (
+    OBJECTIVES,
+    TIMING_MODES,
+    build_options,
+    convert_options,
+    more_convert_options,
+    option_values,
+    options_from_json,
+    options_to_json,
+    output_names,
+    write_json_atomic,
+    write_text_atomic,
+)
+from camtraj.errors import CamtrajError, InputError
+
+if TYPE_CHECKING:
+    from camtraj.convert import ConvertOptions
+
+__all__ = [
+    "FARM_EXTRA_MESSAGE",
+    "MANIFEST_FORMAT",
+    "export_opencue",
+    "export_openjd",
+    "farm_group",
+    "manifest_path_for",
+    "openjd_template",
+    "run_task",
+]
+
+FARM_EXTRA_MESSAGE = "install camtraj[farm] for farm export"
+MANIFEST_FORMAT = "camtraj-farm-tasks-1"
+JOB_DIR_ENV = "CAMTRAJ_JOB_DIR"
+VERSION_ENV = "CAMTRAJ_JOB_VERSION"
+FRAME_TOKEN = "#IFRAME#"
+
+
+def _require(module: str, package: str) -> None:
+    try:
+        __import__(module)
+    except ImportError as exc:
+        msg = f"{FARM_EXTRA_MESSAGE} (missing {package}: {exc})"
+        raise InputError(msg) from exc
+
+
+class _Paths:
+    """Absolute or job-folder-relative spelling of the paths that go into a job."""
+
+    def __init__(self, job_file: Path, *, relative: bool) -> None:
+        self.job_dir = job_file.resolve().parent
+        self.relative = relative
+
+    def __call__(self, path: str | os.PathLike[str]) -> str:
+        absolute = os.path.abspath(path)
+        if not self.relative:
+            return absolute
+        return os.path.relpath(absolute, self.job_dir)
+
+
+_OPENJD_PARAMS = {
+    "--camera": ("Camera", "Camera prim path."),
+    "--robot": ("Robot", "Robot description file."),
+    "--placement": ("Placement", "Stage-to-robot placement x,y,z [m], yaw [deg]."),
+    "--set-file": ("SetFile", "TOML file with a [placement] table."),
+    "--frames": ("Frames", "Film frame range A:B."),
+    "--start-from": ("StartFrom", "Joint values the robot starts from [m, deg]."),
+    "--objective": ("Objective", "IK objective."),
+}
+"""Job parameter name and description of each optional convert flag."""
+
+_PATH_FLAGS = ("--robot", "--set-file")
+
+
+def _portable(options: ConvertOptions, spell: _Paths) -> ConvertOptions:
+    """``options`` with its file paths spelled for the job (absolute or job-relative)."""
+    return replace(
+        options,
+        robot=spell(options.robot) if options.robot is not None else None,
+        set_file=spell(options.set_file) if options.set_file is not None else None,
+    )
+
+
+def _check_shots(shots: Sequence[str]) -> None:
+    if not shots:
+        msg = "no shots given"
+        raise InputError(msg)
+    for shot in shots:
+        if not Path(shot).is_file():
+            msg = f"{shot}: no such shot file"
+            raise InputError(msg)
+
+
+# --------------------------------------------------------------------------------------------
+# Open Job Description.
+# --------------------------------------------------------------------------------------------
+
+
+def openjd_template(
+    shots: Sequence[str],
+    job_file: Path,
+    *,
+    outdir: Path,
+    options: ConvertOptions,
+    relative: bool = False,
+    executable: str = "camtraj",
+    name: str | None = None,
+) -> dict[str, Any]:
+    """Build the Open Job Description job template (specification ``jobtemplate-2023-09``).
+
+    Args:
+        shots: USD shot paths (distinct stems).
+        job_file: Where the template will be written (relative paths start at its folder).
+        outdir: Folder for ``<stem>.mcap`` and ``<stem>.summary.json``.
+        options: Convert options for every task.
+        relative: Write paths relative to the job file's folder.
+        executable: The camtraj command on the render hosts.
+        name: Job name (default: ``camtraj: N shots``).
+
+    Returns:
+        The template as a JSON/YAML-able dict.
+    """
+    spell = _Paths(job_file, relative=relative)
+    names = output_names(shots, outdir)
+    prefix = "{{Param.JobDir}}/" if relative else ""
+
+    params: list[dict[str, Any]] = []
+    if relative:
+        params.append(
+            {
+                "name": "JobDir",
+                "type": "PATH",
+                "objectType": "DIRECTORY",
+                "default": ".",
+                "description": "The folder every relative path of this job starts from "
+                "(the job file's folder).",
+            }
+        )
+    params.append(
+        {
+            "name": "CamtrajCommand",
+            "type": "STRING",
+            "minLength": 1,
+            "default": executable,
+            "description": "The camtraj command on the render hosts.",
+        }
+    )
+    params.append(
+        {
+            "name": "Timing",
+            "type": "STRING",
+            "allowedValues": list(TIMING_MODES),
+            "default": options.timing,
+            "description": "shot: keep the shot's timing; scale: slow it to fit the limits; "
+            "optimal: retime optimally.",
+        }
+    )
+    params.append(
+        {
+            "name": "Rate",
+            "type": "FLOAT",
+            "minValue": 1e-9,
+            "default": float(options.rate),
+            "description": "Servo rate [Hz].",
+        }
+    )
+    args: list[str] = [
+        "convert",
+        prefix + "{{Task.Param.Shot}}",
+        "-o",
+        prefix + "{{Task.Param.Output}}",
+        "--summary",
+        prefix + "{{Task.Param.Summary}}",
+        "--timing",
+        "{{Param.Timing}}",
+        "--rate",
+        "{{Param.Rate}}",
+    ]
+    portable = _portable(options, spell)
+    for flag, value in option_values(portable):
+        if flag in ("--rate", "--timing"):
+            continue
+        param, description = _OPENJD_PARAMS[flag]
+        definition: dict[str, Any] = {"name": param, "type": "STRING", "minLength": 1}
+        if flag == "--objective":
+            definition["allowedValues"] = list(OBJECTIVES)
+        definition["default"] = value
+        is_path = flag in _PATH_FLAGS
+        definition["description"] = description + (
+            " Relative to JobDir." if is_path and relative else ""
+        )
+        params.append(definition)
+        args += [flag, (prefix if is_path else "") + "{{Param." + param + "}}"]
+
+    stated = f"Made by camtraj {__version__} (camtraj farm export --format openjd)."
+    return {
+        "specificationVersion": "jobtemplate-2023-09",
+        "name": name or f"camtraj: {len(shots)} shot{'s' if len(shots) != 1 else ''}",
+        "description": f"{stated} Converts {len(shots)} USD shot(s) into camera-robot moves "
+        "(MCAP), one task per shot.",
+        "parameterDefinitions": params,
+        "steps": [
+            {
+                "name": "Convert",
+                "description": "camtraj convert, one shot per task.",
+                "parameterSpace": {
+                    "taskParameterDefinitions": [
+                        {"name": "Shot", "type": "PATH", "range": [spell(s) for s in shots]},
+                        {"name": "Output", "type": "PATH", "range": [spell(m) for m, _ in names]},
+                        {"name": "Summary", "type": "PATH", "range": [spell(j) for _, j in names]},
+                    ],
+                    "combination": "(Shot, Output, Summary)",
+                },
+                "script": {
+                    "actions": {
+                        "onRun": {"command": "{{Param.CamtrajCommand}}", "args": args},
+                    },
+                },
+            }
+        ],
+    }
+
+
+def _validate_openjd(template: dict[str, Any], job_dir: Path) -> None:
+    """Decode the template and instantiate a job from it, as ``openjd run`` would.
+
+    Raises:
+        InputError: The template does not validate.
+    """
+    from openjd.model import (
+        DecodeValidationError,
+        create_job,
+        decode_job_template,
+        preprocess_job_parameters,
+    )
+
+    try:
+        decoded = decode_job_template(template=template)
+        values = preprocess_job_parameters(
+            job_template=decoded,
+            job_parameter_values={},
+            job_template_dir=job_dir,
+            current_working_dir=Path.cwd(),
+        )
+        create_job(job_template=decoded, job_parameter_values=values)
+    except (DecodeValidationError, ValueError) as exc:
+        msg = f"the Open Job Description template does not validate: {exc}"
+        raise InputError(msg) from exc
+
+
+def export_openjd(
+    shots: Sequence[str],
+    job_file: str | os.PathLike[str],
+    *,
+    options: ConvertOptions,
+    outdir: str | os.PathLike[str] | None = None,
+    relative: bool = False,
+    executable: str = "camtraj",
+    name: str | None = None,
+) -> Path:
+    """Write an Open Job Description job template converting ``shots``, validated.
+
+    Args:
+        shots: USD shot paths (distinct stems).
+        job_file: Output path; JSON if it ends in ``.json``, else YAML.
+        options: Convert options for every task.
+        outdir: Folder for the MCAPs and summaries (default: the job file's folder); created
+            now, as ``camtraj convert`` writes into an existing folder.
+        relative: Paths relative to the job file's folder (see the module docstring).
+        executable: The camtraj command on the render hosts.
+        name: Job name.
+
+    Returns:
+        The job file path.
+
+    Raises:
+        InputError: Missing shot, duplicate stems, missing ``farm`` extra, invalid template.
+    """
+    _require("openjd.model", "openjd-model")
+    _require("yaml", "PyYAML")
+    _check_shots(shots)
+    path = Path(job_file)
+    out = Path(outdir) if outdir is not None else path.resolve().parent
+    template = openjd_template(
+        shots,
+        path,
+        outdir=out,
+        options=options,
+        relative=relative,
+        executable=executable,
+        name=name,
+    )
+    _validate_openjd(template, path.resolve().parent)
+    out.mkdir(parents=True, exist_ok=True)  # camtraj convert writes into an existing folder
+    if path.suffix.lower() == ".json":
+        text = json.dumps(template, indent=2) + "\n"
+    else:
+        import yaml
+
+        header = (
+            f"# Open Job Description job template made by camtraj {__version__}.\n"
+            f"# Run it here with: openjd run {shlex.quote(path.name)}\n"
+        )
+        text = header + yaml.safe_dump(
+            template, sort_keys=False, allow_unicode=True, default_flow_style=False, width=1000
+        )
+    write_text_atomic(path, text)
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# OpenCue.
+# --------------------------------------------------------------------------------------------
+
+
+def manifest_path_for(job_file: str | os.PathLike[str]) -> Path:
+    """The task manifest that goes with an OpenCue job spec: ``JOB.tasks.json`` beside it."""
+    path = Path(job_file)
+    return path.with_name(f"{path.stem}.tasks.json")
+
+
+def _cue_name(text: str) -> str:
+    cleaned = re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_")
+    return cleaned or "camtraj"
+
+
+def export_opencue(
+    shots: Sequence[str],
+    job_file: str | os.PathLike[str],
+    *,
+    options: ConvertOptions,
+    outdir: str | os.PathLike[str] | None = None,
+    relative: bool = False,
+    executable: str = "camtraj",
+    name: str | None = None,
+    show: str | None = None,
+    shot: str | None = None,
+) -> tuple[Path, Path]:
+    """Write an OpenCue job spec (XML) and its task manifest converting ``shots``.
+
+    Args:
+        shots: USD shot paths (distinct stems).
+        job_file: Output path of the spec XML.
+        options: Convert options for every task.
+        outdir: Folder for the MCAPs and summaries (default: the job file's folder).
+        relative: Paths relative to the job file's folder (see the module docstring).
+        executable: The camtraj command on the render hosts.
+        name: Job name (letters, digits, ``_``; default ``camtraj_<job file stem>``).
+        show: OpenCue show (default: ``$SHOW`` or outline's configured default).
+        shot: OpenCue shot (default: ``$SHOT`` or outline's configured default).
+
+    Returns:
+        The spec path and the manifest path.
+
+    Raises:
+        InputError: Missing shot, duplicate stems, missing ``farm`` extra.
+    """
+    _require("outline", "opencue-pyoutline")
+    _check_shots(shots)
+    import outline
+    import outline.backend.cue
+    import outline.cuerun
+    from outline.modules.shell import Shell
+
+    path = Path(job_file)
+    manifest = manifest_path_for(path)
+    spell = _Paths(path, relative=relative)
+    out = Path(outdir) if outdir is not None else path.resolve().parent
+    names = output_names(shots, out)
+
+    portable = _portable(options, spell)
+    tasks = [
+        {"frame": i, "shot": spell(s), "output": spell(m), "summary": spell(j)}
+        for i, (s, (m, j)) in enumerate(zip(shots, names, strict=True), start=1)
+    ]
+    manifest_data = {
+        "format": MANIFEST_FORMAT,
+        "camtraj_version": __version__,
+        "paths": "relative to this file's folder" if relative else "absolute",
+        "options": options_to_json(portable),
+        "tasks": tasks,
+    }
+
+    manifest_ref = manifest.name if relative else str(manifest.resolve())
+    command = " ".join(
+        [shlex.quote(executable), "farm", "run-task", shlex.quote(manifest_ref), FRAME_TOKEN]
+    )
+    frame_range = f"1-{len(shots)}"
+    job_name = _cue_name(name or f"camtraj_{path.stem}")
+    ol = outline.Outline(job_name, frame_range=frame_range, show=show, shot=shot, name_unique=False)
+    ol.set_env(VERSION_ENV, __version__, pre=True)
+    if relative:
+        ol.set_env(JOB_DIR_ENV, str(spell.job_dir), pre=True)
+    ol.add_layer(Shell("convert", command=command, range=frame_range, chunk=1, cores=1))
+    launcher = outline.cuerun.OutlineLauncher(ol, nomail=True)
+    # serialize_simple: the layer command runs as is (no pycuerun wrapper, no outline session).
+    raw = outline.backend.cue.serialize_simple(launcher)
+
+    head, _, body = raw.partition("<spec>")
+    root = ET.fromstring("<spec>" + body)
+    ET.indent(root)
+    doctype = head[head.index("<!DOCTYPE") :] if "<!DOCTYPE" in head else ""
+    text = (
+        '<?xml version="1.0"?>\n'
+        f"{doctype}\n"
+        f"<!-- OpenCue job spec made by camtraj {__version__}: frame N converts shot N "
+        f"of {manifest.name} -->\n" + ET.tostring(root, encoding="unicode") + "\n"
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(manifest, manifest_data)
+    write_text_atomic(path, text)
+    return path, manifest
+
+
+def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
+    """Convert task ``index`` (1-based, the OpenCue frame number) of a task manifest.
+
+    A relative ``manifest`` is taken relative to ``$CAMTRAJ_JOB_DIR`` when that is set, else to
+    the working folder. Paths inside the manifest that are relative start at its folder.
+
+    Returns:
+        The convert summary (also written to the task's summary file).
+
+    Raises:
+        InputError: Unreadable manifest, index out of range, bad input shot.
+        InfeasibleError: The shot cannot be done as asked.
+    """
+    from camtraj.convert import convert
+
+    path = Path(manifest)
+    job_dir = os.environ.get(JOB_DIR_ENV)
+    if not path.is_absolute() and job_dir:
+        path = Path(job_dir) / path
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        msg = f"{path}: cannot read the task manifest: {exc}"
+        raise InputError(msg) from exc
+    if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT:
+        msg = f"{path}: not a camtraj task manifest (format {MANIFEST_FORMAT})"
+        raise InputError(msg)
+    tasks = data["tasks"]
+    if not 1 <= index <= len(tasks):
+        msg = f"{path}: task {index} does not exist; the manifest has tasks 1-{len(tasks)}"
+        raise InputError(msg)
+    made_with = data.get("camtraj_version")
+    if made_with != __version__:
+        print(
+            f"WARNING: {path.name} was made by camtraj {made_with}; this is {__version__}",
+            file=sys.stderr,
+        )
+    base = path.resolve().parent
+    task = tasks[index - 1]
+    shot, output, summary = (
+        os.path.normpath(base / task[k]) for k in ("shot", "output", "summary")
+    )
+    print(f"camtraj {__version__}, task {index}/{len(tasks)}: {shot} -> {output}", flush=True)
+    options = options_from_json(data["options"])
+    options = replace(
+        options,
+        robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
+        set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
+    )
+    Path(output).parent.mkdir(parents=True, exist_ok=True)
+    try:
+        result: dict[str, Any] = convert(shot, output, options, progress=False)
+    except CamtrajError:
+        Path(output).unlink(missing_ok=True)
+        Path(summary).unlink(missing_ok=True)
+        raise
+    write_json_atomic(Path(summary), result)
+    return result
+
+
+# --------------------------------------------------------------------------------------------
+# Commands.
+# --------------------------------------------------------------------------------------------
+
+
+@click.group("farm")
+def farm_group() -> None:
+    """Render-farm jobs (Open Job Description / AWS Deadline Cloud, OpenCue): one task per shot."""
+
+
+@farm_group.command("export")
+@click.option(
+    "--format",
+    "job_format",
+    type=click.Choice(["openjd", "opencue"]),
+    required=True,
+    help="openjd: OpenJD job template (YAML, or JSON for a .json file); "
+    "opencue: OpenCue job spec XML plus JOB.tasks.json.",
+)
+@click.argument("shots", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-o", "--output", "job_file", required=True, type=click.Path(dir_okay=False), help="Job file."
+)
+@click.option(
+    "--outdir",
+    type=click.Path(file_okay=False),
+    help="Folder the tasks write NAME.mcap and NAME.summary.json to (default: the job file's).",
+)
+@click.option(
+    "--relative-paths",
+    is_flag=True,
+    help="Write paths relative to the job file's folder instead of absolute.",
+)
+@click.option(
+    "--executable",
+    default="camtraj",
+    show_default=True,
+    help="The camtraj command on the render hosts.",
+)
+@click.option("--name", help="Job name.")
+@click.option(
+    "--cue-show", "show", help="OpenCue show name (default: $SHOW or the outline config's)."
+)
+@click.option(
+    "--cue-shot", "cue_shot", help="OpenCue shot name (default: $SHOT or the outline config's)."
+)
+@convert_options
+@more_convert_options
+@click.pass_context
+def export_command(
+    ctx: click.Context,
+    job_format: str,
+    shots: tuple[str, ...],
+    job_file: str,
+    outdir: str | None,
+    relative_paths: bool,
+    executable: str,
+    name: str | None,
+    show: str | None,
+    cue_shot: str | None,
+    camera: str | None,
+    robot: str | None,
+    placement: str | None,
+    frames: str | None,
+    rate: float,
+    timing: str,
+    set_file: str | None,
+    start_from: str | None,
+    objective: str | None,
+) -> None:
+    """Write a farm job that converts SHOTS, one task per shot.
+
+    \b
+    openjd   a job template; try it here: openjd check JOB.yaml; openjd run JOB.yaml
+    opencue  a job spec XML and JOB.tasks.json beside it; frame N of its one layer
+             runs: camtraj farm run-task JOB.tasks.json N
+
+    Each task writes OUTDIR/NAME.mcap and NAME.summary.json for a shot NAME.usd*.
+    """
+    try:
+        options = build_options(
+            camera=camera,
+            robot=robot,
+            placement=placement,
+            frames=frames,
+            rate=rate,
+            timing=timing,
+            set_file=set_file,
+            start_from=start_from,
+            objective=objective,
+        )
+        if job_format == "openjd":
+            path = export_openjd(
+                shots,
+                job_file,
+                options=options,
+                outdir=outdir,
+                relative=relative_paths,
+                executable=executable,
+                name=name,
+            )
+            click.echo(f"wrote {path} ({len(shots)} task(s)); run it here with: openjd run {path}")
+        else:
+            path, manifest = export_opencue(
+                shots,
+                job_file,
+                options=options,
+                outdir=outdir,
+                relative=relative_paths,
+                executable=executable,
+                name=name,
+                show=show,
+                shot=cue_shot,
+            )
+            click.echo(f"wrote {path} and {manifest} (frames 1-{len(shots)}, one per shot)")
+    except CamtrajError as exc:
+        click.echo(f"ERROR: {exc}", err=True)
+        ctx.exit(exc.exit_code)
+
+
+@farm_group.command("run-task")
+@click.argument("manifest", type=click.Path(dir_okay=False))
+@click.argument("index", type=click.IntRange(min=1))
+@click.pass_context
+def run_task_command(ctx: click.Context, manifest: str, index: int) -> None:
+    """Convert shot INDEX (1-based; the OpenCue frame) of a task MANIFEST.
+
+    Exit codes as for camtraj convert: 0 ok, 2 bad input, 3 infeasible.
+    """
+    try:
+        result = run_task(manifest, index)
+    except CamtrajError as exc:
+        click.echo(f"ERROR: {exc}", err=True)
+        ctx.exit(exc.exit_code)
+    click.echo(f"task {index}: {result.get('status')}, wrote {result.get('output')}")
