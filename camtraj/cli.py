@@ -7,6 +7,7 @@ Errors are printed as one ``ERROR:`` line naming the frames, axes and margins; n
 from __future__ import annotations
 
 import json
+import logging
 import math
 import sys
 from collections.abc import Callable
@@ -83,6 +84,7 @@ def main() -> None:
     Units: metres and degrees on the command line; metres and radians in files.
     Exit codes: 0 ok, 2 bad input or usage, 3 the shot cannot be done as asked.
     """
+    logging.basicConfig(format="warning: %(message)s", level=logging.WARNING)
 
 
 @main.command()
@@ -104,9 +106,16 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     from camtraj.convert import convert as run
 
     try:
+        if summary is not None:
+            _check_writable(summary, "--summary")
         result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
         if summary is not None:
-            write_json_atomic(_path(summary), result)
+            try:
+                write_json_atomic(_path(summary), result)
+            except OSError as exc:
+                _path(output).unlink(missing_ok=True)  # all or nothing
+                msg = f"cannot write {summary}: {exc.strerror or exc}"
+                raise InputError(msg) from exc
     except CamtrajError as exc:
         _fail(exc)
     if not quiet:
@@ -198,6 +207,15 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 # ---------------------------------------------------------------------------------------------
 # Reports
 # ---------------------------------------------------------------------------------------------
+
+
+def _check_writable(path: str, option: str) -> None:
+    """Fail early (exit 2) when the folder of an output file does not exist."""
+    folder = _path(path).parent
+    if not folder.is_dir():
+        what = "is not a folder" if folder.exists() else "does not exist"
+        msg = f"cannot write {option} {path}: folder {folder} {what}"
+        raise InputError(msg)
 
 
 def _path(p: str) -> Any:

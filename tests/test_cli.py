@@ -393,11 +393,7 @@ def test_placement_with_yaw_is_the_robot_base_pose_in_the_stage(
 BAD_KEYS = [
     "missing_file", "text_renamed_usd", "truncated_usdc", "no_camera", "two_cameras",
     "nan_transform", "robot_missing_value", "robot_out_of_range", "output_folder_missing",
-    "output_under_a_file", "bad_placement",
-    pytest.param("summary_under_a_file", marks=pytest.mark.xfail(strict=True, reason=(
-        "cli.py convert writes --summary only after the MCAP is written, with "
-        "batch.write_json_atomic whose OSError is not turned into an InputError: exit 1 "
-        "with a traceback, and the MCAP is left behind"))),
+    "output_under_a_file", "bad_placement", "summary_under_a_file",
 ]
 
 
