@@ -1,3 +1,6 @@
+"""``python -m camtraj``: the command line."""
+
 from camtraj.cli import main
 
-main()
+if __name__ == "__main__":
+    main()

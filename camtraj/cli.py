@@ -10,14 +10,14 @@ import json
 import logging
 import math
 import sys
-from collections.abc import Callable
 from typing import Any, NoReturn
 
 import click
 
 import camtraj
-from camtraj.batch import batch_command, build_options, convert_options, write_json_atomic
+from camtraj.batch import batch_command, write_json_atomic
 from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
+from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
@@ -32,42 +32,8 @@ def _progress_wanted(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
-def _parse_start(text: str | None) -> tuple[float, ...] | None:
-    """``--start-from`` values: 8 comma-separated joint values, metres and degrees."""
-    if text is None:
-        return None
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != 8 or not all(math.isfinite(v) for v in vals):
-        msg = f"--start-from needs 8 numbers (m for track/extend, deg for the rest), got {text!r}"
-        raise InputError(msg)
-    return tuple(math.radians(v) if REVOLUTE[i] else v for i, v in enumerate(vals))
-
-
-def _extra_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    for deco in reversed([
-        click.option("--set-file", type=click.Path(dir_okay=False), metavar="SET.toml",
-                     help="A TOML file whose [placement] table places the robot "
-                          "(x, y, z [m], yaw_deg or rotation); --placement wins."),
-        click.option("--start-from", metavar="Q1,...,Q8",
-                     help="Joint values the robot starts from (m for track/extend, deg for "
-                          "the rest); default the robot's home."),
-        click.option("--objective", type=click.Choice(["smooth", "paper"]),
-                     help="IK objective (default: the robot file's, normally smooth)."),
-    ]):
-        func = deco(func)
-    return func
-
-
-def _options(kw: dict[str, Any]) -> Any:
-    from dataclasses import replace
-
-    base = build_options(camera=kw["camera"], robot=kw["robot"], placement=kw["placement"],
-                         frames=kw["frames"], rate=kw["rate"], timing=kw["timing"])
-    return replace(base, set_file=kw["set_file"], start_from=_parse_start(kw["start_from"]),
-                   objective=kw["objective"])
+def _options(kw: dict[str, Any]) -> ConvertOptions:
+    return build_options(**kw)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -92,7 +58,7 @@ def main() -> None:
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               metavar="OUT.mcap", help="The MCAP file to write (atomically).")
 @convert_options
-@_extra_options
+@more_convert_options
 @click.option("--summary", type=click.Path(dir_okay=False), metavar="FILE.json",
               help="Also write the run's summary as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
@@ -125,7 +91,7 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
 @main.command()
 @click.argument("shot", type=click.Path(dir_okay=False))
 @convert_options
-@_extra_options
+@more_convert_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:

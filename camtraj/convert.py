@@ -24,12 +24,12 @@ import camtraj
 from camtraj.errors import InputError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.mcap_io import TakeData, write_take
+from camtraj.options import ConvertOptions
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
-TIMING_MODES = ("shot", "scale", "optimal")
 
 
 @dataclass(frozen=True)
@@ -102,44 +102,6 @@ class Placement:
             "yaw_deg": math.degrees(math.atan2(R[1, 0], R[0, 0])),
             "rotation": R.tolist(),
         }
-
-
-@dataclass(frozen=True)
-class ConvertOptions:
-    """Options of ``camtraj convert`` / ``check`` (the CLI maps its flags onto these).
-
-    Attributes:
-        camera: Camera prim path; default the stage's only camera.
-        robot: Robot description file; default the built-in robot.
-        placement: Robot base in the stage as (x, y, z [m], yaw [deg]); default identity.
-        set_file: A TOML file with a ``[placement]`` table (used when ``placement`` is None).
-        frames: Inclusive film frame range (first, last); default the stage's range.
-        rate: Requested servo rate [Hz].
-        timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
-        start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
-        objective: IK objective override (``"smooth"`` or ``"paper"``).
-    """
-
-    camera: str | None = None
-    robot: str | None = None
-    placement: tuple[float, float, float, float] | None = None
-    set_file: str | None = None
-    frames: tuple[int, int] | None = None
-    rate: float = 250.0
-    timing: str = "shot"
-    start_from: tuple[float, ...] | None = None
-    objective: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.timing not in TIMING_MODES:
-            msg = f"timing must be one of {', '.join(TIMING_MODES)}, got {self.timing!r}"
-            raise InputError(msg)
-        if not (math.isfinite(self.rate) and 10.0 <= self.rate <= 10000.0):
-            msg = f"rate must be between 10 and 10000 Hz, got {self.rate}"
-            raise InputError(msg)
-        if self.start_from is not None and len(self.start_from) != 8:
-            msg = f"start-from needs 8 joint values, got {len(self.start_from)}"
-            raise InputError(msg)
 
 
 @dataclass

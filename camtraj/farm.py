@@ -50,29 +50,25 @@ import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 from xml.etree import ElementTree as ET
 
 import click
 
 from camtraj import __version__
-from camtraj.batch import (
+from camtraj.batch import output_names, write_json_atomic, write_text_atomic
+from camtraj.errors import CamtrajError, InputError
+from camtraj.options import (
     OBJECTIVES,
     TIMING_MODES,
+    ConvertOptions,
     build_options,
     convert_options,
     more_convert_options,
     option_values,
     options_from_json,
     options_to_json,
-    output_names,
-    write_json_atomic,
-    write_text_atomic,
 )
-from camtraj.errors import CamtrajError, InputError
-
-if TYPE_CHECKING:
-    from camtraj.convert import ConvertOptions
 
 __all__ = [
     "FARM_EXTRA_MESSAGE",

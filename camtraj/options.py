@@ -1,0 +1,281 @@
+"""Convert options, and their command-line form shared by convert, check, batch and farm.
+
+Light on purpose (no numpy, scipy or USD): a batch parent, ``farm export`` and ``--help`` import
+it without loading the pipeline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import click
+
+from camtraj.errors import InputError
+
+TIMING_MODES = ("shot", "scale", "optimal")
+OBJECTIVES = ("smooth", "paper")
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """Options of ``camtraj convert`` / ``check`` (the CLI maps its flags onto these).
+
+    Attributes:
+        camera: Camera prim path; default the stage's only camera.
+        robot: Robot description file; default the built-in robot.
+        placement: Robot base in the stage as (x, y, z [m], yaw [deg]); default identity.
+        set_file: A TOML file with a ``[placement]`` table (used when ``placement`` is None).
+        frames: Inclusive film frame range (first, last); default the stage's range.
+        rate: Requested servo rate [Hz].
+        timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
+        start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
+        objective: IK objective override (``"smooth"`` or ``"paper"``).
+    """
+
+    camera: str | None = None
+    robot: str | None = None
+    placement: tuple[float, float, float, float] | None = None
+    set_file: str | None = None
+    frames: tuple[int, int] | None = None
+    rate: float = 250.0
+    timing: str = "shot"
+    start_from: tuple[float, ...] | None = None
+    objective: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.timing not in TIMING_MODES:
+            msg = f"timing must be one of {', '.join(TIMING_MODES)}, got {self.timing!r}"
+            raise InputError(msg)
+        if not (math.isfinite(self.rate) and 10.0 <= self.rate <= 10000.0):
+            msg = f"rate must be between 10 and 10000 Hz, got {self.rate}"
+            raise InputError(msg)
+        if self.start_from is not None and len(self.start_from) != 8:
+            msg = f"start-from needs 8 joint values, got {len(self.start_from)}"
+            raise InputError(msg)
+        if self.objective is not None and self.objective not in OBJECTIVES:
+            msg = f"objective must be one of {', '.join(OBJECTIVES)}, got {self.objective!r}"
+            raise InputError(msg)
+
+
+
+# --------------------------------------------------------------------------------------------
+# Their command-line form, shared by convert, check, batch and farm export.
+# --------------------------------------------------------------------------------------------
+
+
+def _parse_placement(text: str) -> tuple[float, float, float, float]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        msg = f"placement must be x,y,z,yaw_deg (4 numbers), got {text!r}"
+        raise InputError(msg)
+    return (values[0], values[1], values[2], values[3])
+
+
+def _parse_frames(text: str) -> tuple[int, int]:
+    first, sep, last = text.partition(":")
+    try:
+        frames = (int(first), int(last))
+    except ValueError:
+        sep = ""
+    if not sep:
+        msg = f"frames must be A:B (two whole frame numbers), got {text!r}"
+        raise InputError(msg)
+    if frames[1] < frames[0]:
+        msg = f"frames {text!r}: the last frame is before the first"
+        raise InputError(msg)
+    return frames
+
+
+def _parse_start_from(text: str) -> tuple[float, ...]:
+    """``--start-from``: 8 joint values, metres for track/extend, degrees for the rest -> SI."""
+    from camtraj.robot import REVOLUTE
+
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != len(REVOLUTE) or not all(math.isfinite(v) for v in values):
+        msg = (
+            f"--start-from needs {len(REVOLUTE)} numbers (m for track/extend, deg for the rest), "
+            f"got {text!r}"
+        )
+        raise InputError(msg)
+    return tuple(math.radians(v) if REVOLUTE[i] else v for i, v in enumerate(values))
+
+
+def _format_start_from(values: Sequence[float]) -> str:
+    from camtraj.robot import REVOLUTE
+
+    return ",".join(
+        repr(math.degrees(v) if REVOLUTE[i] else float(v)) for i, v in enumerate(values)
+    )
+
+
+def convert_options(func: F) -> F:
+    """Click decorator adding the options of ``camtraj convert`` that a batch or a job passes on.
+
+    Adds ``--camera``, ``--robot``, ``--placement``, ``--frames``, ``--rate`` and ``--timing``;
+    turn their values into :class:`camtraj.convert.ConvertOptions` with :func:`build_options`.
+    """
+    decorators = [
+        click.option(
+            "--camera", metavar="PRIM", help="Camera prim path (default: the only camera)."
+        ),
+        click.option(
+            "--robot",
+            type=click.Path(exists=True, dir_okay=False),
+            metavar="ROBOT.toml",
+            help="Robot description file (default: the built-in robot).",
+        ),
+        click.option(
+            "--placement",
+            metavar="X,Y,Z,YAW_DEG",
+            help="Where the robot base stands in the stage: x,y,z [m] and yaw about up [deg] "
+            "(default: at the stage origin).",
+        ),
+        click.option("--frames", metavar="A:B", help="Film frame range to convert (inclusive)."),
+        click.option(
+            "--rate",
+            type=click.FloatRange(min=0.0, min_open=True),
+            default=250.0,
+            show_default=True,
+            help="Servo rate [Hz].",
+        ),
+        click.option(
+            "--timing",
+            type=click.Choice(TIMING_MODES),
+            default="shot",
+            show_default=True,
+            help="Keep the shot's timing, scale it to fit the limits, or retime optimally.",
+        ),
+    ]
+    for decorator in reversed(decorators):
+        func = decorator(func)
+    return func
+
+
+def more_convert_options(func: F) -> F:
+    """Click decorator adding ``--set-file``, ``--start-from`` and ``--objective``.
+
+    The less common convert options; pass their values to :func:`build_options` too.
+    """
+    decorators = [
+        click.option(
+            "--set-file",
+            type=click.Path(exists=True, dir_okay=False),
+            metavar="SET.toml",
+            help="A TOML file whose [placement] table places the robot; --placement wins.",
+        ),
+        click.option(
+            "--start-from",
+            metavar="Q1,...,Q8",
+            help="Joint values the robot starts from (m for track/extend, deg for the rest).",
+        ),
+        click.option(
+            "--objective",
+            type=click.Choice(OBJECTIVES),
+            help="IK objective (default: the robot file's).",
+        ),
+    ]
+    for decorator in reversed(decorators):
+        func = decorator(func)
+    return func
+
+
+def build_options(
+    *,
+    camera: str | None,
+    robot: str | None,
+    placement: str | None,
+    frames: str | None,
+    rate: float,
+    timing: str,
+    set_file: str | None = None,
+    start_from: str | None = None,
+    objective: str | None = None,
+) -> ConvertOptions:
+    """Build convert options from the command-line strings of the option decorators.
+
+    Raises:
+        InputError: A malformed ``placement``, ``frames`` or ``start_from``, or a value that
+            :class:`~camtraj.convert.ConvertOptions` refuses.
+    """
+    return ConvertOptions(
+        camera=camera,
+        robot=robot,
+        placement=_parse_placement(placement) if placement is not None else None,
+        set_file=set_file,
+        frames=_parse_frames(frames) if frames is not None else None,
+        rate=float(rate),
+        timing=timing,
+        start_from=_parse_start_from(start_from) if start_from is not None else None,
+        objective=objective,
+    )
+
+
+def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
+    """``(flag, value)`` of every ``camtraj convert`` option that reproduces ``options``.
+
+    ``--rate`` and ``--timing`` always; the others when set. Values are command-line text
+    (placement and start-from in metres and degrees).
+    """
+    pairs: list[tuple[str, str]] = []
+    if options.camera is not None:
+        pairs.append(("--camera", options.camera))
+    if options.robot is not None:
+        pairs.append(("--robot", str(options.robot)))
+    if options.placement is not None:
+        pairs.append(("--placement", ",".join(repr(float(v)) for v in options.placement)))
+    if options.set_file is not None:
+        pairs.append(("--set-file", str(options.set_file)))
+    if options.frames is not None:
+        pairs.append(("--frames", f"{options.frames[0]}:{options.frames[1]}"))
+    pairs.append(("--rate", repr(float(options.rate))))
+    pairs.append(("--timing", options.timing))
+    if options.start_from is not None:
+        pairs.append(("--start-from", _format_start_from(options.start_from)))
+    if options.objective is not None:
+        pairs.append(("--objective", options.objective))
+    return pairs
+
+
+def options_to_args(options: ConvertOptions) -> list[str]:
+    """The ``camtraj convert`` arguments that reproduce ``options``.
+
+    Returns:
+        Arguments, one list item per argv word (not shell-quoted).
+    """
+    return [word for pair in option_values(options) for word in pair]
+
+
+def options_to_json(options: ConvertOptions) -> dict[str, Any]:
+    """Convert options as a JSON-able dict (tuples become lists)."""
+    return {
+        f.name: list(value) if isinstance(value, tuple) else value
+        for f in dataclasses.fields(options)
+        for value in [getattr(options, f.name)]
+    }
+
+
+def options_from_json(data: dict[str, Any]) -> ConvertOptions:
+    """Inverse of :func:`options_to_json`.
+
+    Raises:
+        InputError: ``data`` names an option that this camtraj does not have.
+    """
+    known = {f.name for f in dataclasses.fields(ConvertOptions)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        msg = f"unknown convert option(s) {unknown}; this camtraj knows {sorted(known)}"
+        raise InputError(msg)
+    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+    return ConvertOptions(**values)

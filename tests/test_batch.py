@@ -1,0 +1,225 @@
+"""camtraj batch: parallel conversion, report, exit codes, up-to-date skipping."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from camtraj.batch import REPORT_NAME, run_batch
+from camtraj.errors import InputError
+from camtraj.options import build_options, options_to_args
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "samples" / "shots"
+FEASIBLE = ("maya_dolly_push_in", "blender_crane_up", "orbit_animated_parent")
+FAILING = ("whip_pan", "unreachable")  # infeasible under the default --timing shot
+
+
+def _camtraj() -> list[str]:
+    if (ROOT / "camtraj" / "__main__.py").is_file():
+        return [sys.executable, "-m", "camtraj"]
+    return [str(Path(sys.executable).parent / "camtraj")]
+
+
+def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*_camtraj(), *args], cwd=cwd, capture_output=True, text=True, check=False
+    )
+
+
+def _sample_args() -> list[str]:
+    return [str(SAMPLES / f"{name}.usda") for name in (*FEASIBLE, *FAILING)]
+
+
+@pytest.fixture(scope="module")
+def batch_run(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    """`camtraj batch` over every sample, once."""
+    out = tmp_path_factory.mktemp("batch") / "out"
+    proc = _run("batch", *_sample_args(), "-o", str(out), "--jobs", "2")
+    return out, proc
+
+
+def test_report_lists_every_shot_with_its_status(
+    batch_run: tuple[Path, subprocess.CompletedProcess[str]],
+) -> None:
+    out, proc = batch_run
+    report = json.loads((out / REPORT_NAME).read_text())
+    status = {Path(s["shot"]).stem: s["status"] for s in report["shots"]}
+    assert status == {**dict.fromkeys(FEASIBLE, "ok"), **dict.fromkeys(FAILING, "failed")}
+    for entry in report["shots"]:
+        if entry["status"] == "failed":
+            assert entry["exit_code"] == 3
+            assert entry["reason"]
+            assert not Path(entry["output"]).exists()
+            assert not Path(entry["summary_path"]).exists()
+        else:
+            assert entry["frames"] is not None
+            assert entry["max_speed"] is not None
+            summary = json.loads(Path(entry["summary_path"]).read_text())
+            assert summary["status"]
+    assert report["counts"] == {"ok": 3, "failed": 2, "skipped": 0}
+    # The table on stdout names every shot and status.
+    for name in (*FEASIBLE, *FAILING):
+        assert f"{name}.usda" in proc.stdout
+    assert "failed:" in proc.stdout
+    # Every failure is an infeasible shot: exit code 3 (non-zero because unreachable fails).
+    assert proc.returncode == 3, proc.stderr
+    assert report["exit_code"] == 3
+
+
+def test_outputs_are_byte_identical_to_single_converts(
+    batch_run: tuple[Path, subprocess.CompletedProcess[str]], tmp_path: Path
+) -> None:
+    out, _ = batch_run
+    procs = {
+        name: subprocess.Popen(
+            [
+                *_camtraj(),
+                "convert",
+                str(SAMPLES / f"{name}.usda"),
+                "-o",
+                str(tmp_path / f"{name}.mcap"),
+                "--quiet",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        for name in (FEASIBLE[0], FEASIBLE[2])
+    }
+    for name, proc in procs.items():
+        _, err = proc.communicate()
+        assert proc.returncode == 0, err
+        single = (tmp_path / f"{name}.mcap").read_bytes()
+        assert single == (out / f"{name}.mcap").read_bytes(), name
+
+
+def test_rerun_skips_up_to_date_shots_and_retries_failures(
+    batch_run: tuple[Path, subprocess.CompletedProcess[str]],
+) -> None:
+    out, _ = batch_run
+    before = {n: (out / f"{n}.mcap").stat().st_mtime_ns for n in FEASIBLE}
+    shots = [str(SAMPLES / f"{name}.usda") for name in (*FEASIBLE, "unreachable")]
+    options = build_options(
+        camera=None, robot=None, placement=None, frames=None, rate=250.0, timing="shot"
+    )
+    assert run_batch(shots, out, jobs=2, options=options).exit_code == 3
+    report = json.loads((out / REPORT_NAME).read_text())
+    status = {Path(s["shot"]).stem: s["status"] for s in report["shots"]}
+    assert status == {**dict.fromkeys(FEASIBLE, "skipped"), "unreachable": "failed"}
+    assert {n: (out / f"{n}.mcap").stat().st_mtime_ns for n in FEASIBLE} == before
+    skipped = next(s for s in report["shots"] if s["status"] == "skipped")
+    assert skipped["frames"] is not None  # read back from the summary
+
+
+def test_touched_shot_robot_file_and_force_reconvert(tmp_path: Path) -> None:
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    shot = shots / "dolly.usda"
+    shutil.copy2(SAMPLES / "maya_dolly_push_in.usda", shot)
+    robot = tmp_path / "robot.toml"
+    shutil.copy2(ROOT / "camtraj" / "data" / "robot.toml", robot)
+    options = build_options(
+        camera=None, robot=str(robot), placement=None, frames="1001:1012", rate=250.0, timing="shot"
+    )
+    out = tmp_path / "out"
+
+    def statuses(**kwargs: bool) -> list[str]:
+        report = run_batch([str(shot)], out, jobs=1, options=options, **kwargs)
+        assert report.exit_code == 0, report.table()
+        return [r.status for r in report.results]
+
+    assert statuses() == ["ok"]
+    assert statuses() == ["skipped"]
+    assert statuses(force=True) == ["ok"]
+    faster = dataclasses.replace(options, rate=500.0)
+    report = run_batch([str(shot)], out, jobs=1, options=faster)
+    assert [r.status for r in report.results] == ["ok"]  # other options: not up to date
+    assert statuses() == ["ok"]  # and back
+    mcap = out / "dolly.mcap"
+    for path in (shot, robot):
+        now = time.time_ns()
+        for p, age in ((shot, 100), (robot, 100), (mcap, 50), (out / "dolly.summary.json", 50)):
+            os.utime(p, ns=(now - age * 10**9, now - age * 10**9))
+        assert statuses() == ["skipped"]
+        path.touch()  # now newer than the outputs
+        assert statuses() == ["ok"], path
+
+
+def test_bad_input_shot_makes_exit_code_2_and_the_rest_still_convert(tmp_path: Path) -> None:
+    bad = tmp_path / "garbage.usda"
+    bad.write_text("this is not USD\n")
+    good = tmp_path / "good.usda"
+    shutil.copy2(SAMPLES / "orbit_animated_parent.usda", good)
+    options = build_options(
+        camera=None, robot=None, placement=None, frames=None, rate=250.0, timing="shot"
+    )
+    report = run_batch(
+        [str(bad), str(good), str(SAMPLES / "unreachable.usda")],
+        tmp_path / "o",
+        jobs=2,
+        options=options,
+    )
+    by_name = {Path(r.shot).stem: r for r in report.results}
+    assert by_name["good"].status == "ok"
+    assert by_name["garbage"].status == "failed"
+    assert by_name["garbage"].exit_code == 2
+    assert by_name["unreachable"].exit_code == 3
+    assert report.exit_code == 2
+    assert (tmp_path / "o" / "good.mcap").is_file()
+
+
+def test_duplicate_stems_are_refused_before_starting(tmp_path: Path) -> None:
+    (tmp_path / "a").mkdir()
+    copy = tmp_path / "a" / "whip_pan.usda"
+    shutil.copy2(SAMPLES / "whip_pan.usda", copy)
+    out = tmp_path / "out"
+    proc = _run("batch", str(SAMPLES / "whip_pan.usda"), str(copy), "-o", str(out))
+    assert proc.returncode == 2
+    assert "whip_pan.mcap" in proc.stderr
+    assert not out.exists()
+
+
+def test_malformed_options_are_input_errors() -> None:
+    with pytest.raises(InputError, match="placement"):
+        build_options(
+            camera=None, robot=None, placement="1,2", frames=None, rate=1.0, timing="shot"
+        )
+    with pytest.raises(InputError, match="frames"):
+        build_options(
+            camera=None, robot=None, placement=None, frames="9:3", rate=1.0, timing="shot"
+        )
+    options = build_options(
+        camera="/World/cam",
+        robot=None,
+        placement="-1,2,0,90",
+        frames="1:5",
+        rate=100.0,
+        timing="scale",
+    )
+    assert options_to_args(options) == [
+        "--camera", "/World/cam", "--placement", "-1.0,2.0,0.0,90.0",
+        "--frames", "1:5", "--rate", "100.0", "--timing", "scale",
+    ]  # fmt: skip
+    with pytest.raises(InputError, match="start-from"):
+        build_options(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                      timing="shot", start_from="1,2,3")  # fmt: skip
+    more = build_options(
+        camera=None, robot=None, placement=None, frames=None, rate=250.0, timing="shot",
+        start_from="1,90,0,0,-90,0,0,0", objective="paper",
+    )  # fmt: skip
+    assert more.start_from is not None
+    assert more.start_from[1] == pytest.approx(math.pi / 2)
+    assert options_to_args(more)[-4:] == [
+        "--start-from", "1.0,90.0,0.0,0.0,-90.0,0.0,0.0,0.0", "--objective", "paper",
+    ]  # fmt: skip
