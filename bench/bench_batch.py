@@ -56,7 +56,7 @@ def _long_shot(path: Path, frames: int) -> Path:
         sys.modules[spec.name] = module  # dataclasses look their module up while executing
         spec.loader.exec_module(module)
         if hasattr(module, "write_long_shot"):
-            module.write_long_shot(path, n_frames=frames)
+            module.write_long_shot(path, n_frames=frames, part=frames / 1440)
             return path
     shutil.copyfile(SAMPLES / "blender_crane_up.usda", path)
     return path

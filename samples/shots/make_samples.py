@@ -424,10 +424,12 @@ SAMPLES: dict[str, Callable[[], str]] = {
 """File name -> function returning the file's text."""
 
 
-def long_move(n_frames: int = 1440) -> Move:
+def long_move(n_frames: int = 1440, part: float = 1.0) -> Move:
     """A smooth, feasible combined move: track travel, crane, pan and tilt (Z-up, m).
 
-    Frames 1..n_frames. Over the whole take (eased start and stop) the camera travels x 4 ->
+    Frames 1..n_frames cover the first ``part`` of the move (1: all of it; 1/6 of a one-minute
+    move in 240 frames keeps its speeds). Over the whole take (eased start and stop) the camera
+    travels x 4 ->
     9 m with a weave, y swings ±1.2 m, z cranes between 0.2 and 1.2 m, pan wanders -30° to
     +45°, tilt -5° to -17° (lower when high); focal 35 -> 50 -> 35 mm, focus 2-4 m. (A camera
     high above the shoulder looking level is where this robot's wrist nears its singularity:
@@ -436,8 +438,11 @@ def long_move(n_frames: int = 1440) -> Move:
     if n_frames < 2:
         msg = f"n_frames must be at least 2, not {n_frames}"
         raise ValueError(msg)
+    if not 0.0 < part <= 1.0:
+        msg = f"part must be in (0, 1], not {part}"
+        raise ValueError(msg)
     frames = np.arange(1, n_frames + 1, dtype=np.float64)
-    u = ease((frames - 1.0) / (n_frames - 1.0))
+    u = ease(part * (frames - 1.0) / (n_frames - 1.0))
     pos = np.stack(
         [
             4.0 + 5.0 * u + 0.6 * np.sin(4.0 * np.pi * u),
@@ -453,18 +458,22 @@ def long_move(n_frames: int = 1440) -> Move:
     return Move(frames, pos, pan, tilt, focal, focus, 2.8)
 
 
-def write_long_shot(path: str | Path, n_frames: int = 1440, fps: float = 24) -> Path:
+def write_long_shot(
+    path: str | Path, n_frames: int = 1440, fps: float = 24, part: float = 1.0
+) -> Path:
     """Write :func:`long_move` as a Z-up metre stage (camera ``/World/cam``), for benchmarks.
 
     Args:
         path: Output ``.usda`` file.
         n_frames: Number of frames (1 .. n_frames); 1440 at 24 fps is one minute.
         fps: Frames (and time codes) per second.
+        part: Fraction of the one-minute move to write (see :func:`long_move`), e.g.
+            ``n_frames=240, part=1/6`` for its first ten seconds at the same speeds.
 
     Returns:
         The written path.
     """
-    move = long_move(n_frames)
+    move = long_move(n_frames, part)
     doc = f"camtraj long benchmark shot: {n_frames} frames at {_num(fps)} fps (Z-up, metres)."
     body = _scope("Xform", "World", [_camera_prim_trs("cam", move, "Z", 1.0, "    ")])
     text = _header(doc, "Z", 1.0, move.frames, float(fps), "World") + "\n" + body + "\n"
