@@ -47,6 +47,7 @@ _TRACK, _ROTATE, _LIFT, _EXTEND, _ELBOW, _PAN, _TILT, _ROLL = range(8)
 _WRIST_EPS = 1e-10  # |cos tilt| below this is the wrist singularity
 _FAST_RADIUS = 1e-3  # [m] certificate only when the competing region is this small
 _CERT_SAFETY = 0.5  # sensitivity must stay below this fraction of the prismatic weights
+_SURVEY_STRIDE = 4  # frames between samples when comparing first-frame branches
 _SMOOTH_TUBE = math.radians(20.0)  # most a revolute axis may move away from its SM solution
 _EDGE = 1e-12  # rounding allowance at closed-form boundaries (reach, limits) [-, m, rad]
 _FRONT_BACK = np.array([0.0, math.pi])
@@ -525,7 +526,7 @@ class _Problem:
         return bool(self.best_cost == fstar)
 
     # -- the 2-D search ---------------------------------------------------------------------
-    def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.3,
+    def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.4,
                    tol1: float = 1e-10, tol_t: float = 1e-9) -> None:
         """Grid over the box that must hold the optimum, then zoom around the best cells.
 
@@ -572,12 +573,12 @@ class _Problem:
                 break
             cols, tw = [], []
             for r1c, tc, w1, wt in windows:
-                col = np.linspace(r1c - w1, r1c + w1, 7)
+                col = np.linspace(r1c - w1, r1c + w1, 5)
                 if r1c - w1 <= r1p <= r1c + w1:
                     col = np.append(col, r1p)
                 cols.append(col)
                 tw.append((tc - wt, tc + wt))
-            found = self._grid_windows(cols, tw, 7, r4p, self.ball())
+            found = self._grid_windows(cols, tw, 5, r4p, self.ball())
             # windows that stay clearly worse than the best are other, worse basins
             slack = 1e-3 if rnd < 4 else 1e-7
             nxt = []
@@ -820,10 +821,11 @@ def solve_path_report(
     """:func:`solve_path` with per-frame costs and relaxation flags.
 
     With the smooth objective and a frame interval, a shot whose frames needed relaxed margins
-    or a widened step bound is solved again from each other branch of its first frame (elbow
-    up or down, wrist flipped, arm turned over), and the run needing the fewest relaxed frames
-    (then the least motion) is kept: consecutive frames cannot change branch, so the first
-    frame's branch decides where the whole move can go.
+    or a widened step bound is surveyed from each branch of its first frame (elbow up or down,
+    wrist flipped, arm turned over) on every fourth frame, and the most promising branch is
+    solved in full; the run needing the fewest relaxed frames (then the least motion) is kept.
+    Consecutive frames cannot change branch, so the first frame's branch decides where the
+    whole move can go.
     """
     Ts = np.asarray(targets, dtype=float)
     if Ts.ndim != 3 or Ts.shape[1:] != (4, 4):
@@ -839,16 +841,22 @@ def solve_path_report(
     run = _solve_sequence(robot, Ts, first, obj, step, frames, None, progress)
     if run.errors:
         raise UnreachableFramesError(run.errors)
-    if step is not None and run.relaxed > 0:
+    if step is not None and run.relaxed > 0 and n > 2 * _SURVEY_STRIDE:
+        # survey every branch of the first frame on every few frames (cheap), then solve the
+        # most promising one in full if it is not the one already solved
+        k = _SURVEY_STRIDE
+        survey: dict[int, tuple[int, float]] = {}
         for branch in range(N_BRANCHES):
-            if branch == run.first_branch:
-                continue
-            other = _solve_sequence(robot, Ts, first, obj, step, frames, branch, None,
+            trial = _solve_sequence(robot, Ts[::k], first, obj, step * k, frames[::k], branch,
+                                    None, give_up=min(survey.values(), default=None))
+            if trial.complete and not trial.errors:
+                survey[branch] = trial.score
+        best = min(survey, key=lambda b: survey[b], default=run.first_branch)
+        if best != run.first_branch and survey[best][0] * k < run.relaxed:
+            other = _solve_sequence(robot, Ts, first, obj, step, frames, best, None,
                                     give_up=run.score)
             if other.complete and not other.errors and other.score < run.score:
                 run = other
-                if run.relaxed == 0:
-                    break
     out, cost, levels, steps = run.q, run.cost, run.levels, run.steps
     smoothed = np.zeros(n, dtype=bool)
     if obj == "smooth" and frame_interval is not None and robot.ik.smoothing > 0:
