@@ -263,7 +263,7 @@ def summary(
     if relaxed_margin:
         warnings.append(f"{len(relaxed_margin)} frame(s) needed the hard joint limits "
                         f"(smooth margins relaxed): first {relaxed_margin[0]}")
-    if relaxed_step:
+    if relaxed_step and take.mode == "shot":
         warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
                         f"limit between frames: first {relaxed_step[0]}")
 
