@@ -166,3 +166,20 @@ def test_paper_objective_rides_full_stretch_smooth_keeps_margin(robot: Robot) ->
         stretched = np.linalg.norm(w - s) >= np.linalg.norm(e - s) + robot.dh.r6 - 1e-6
         assert stretched == expect_stretched
     assert smooth.cost > paper.cost
+
+
+def test_wrist_singularity_keeps_the_previous_pan(robot: Robot) -> None:
+    """At tilt = +-90 deg pan and roll align; the solution keeps the previous pan, no jump."""
+    for tilt in (math.pi / 2, -math.pi / 2):
+        q = np.array([0.5, 0.2, -0.1, 0.4, -1.2, 0.3, tilt, 0.5])
+        T = robot.fk(q)
+        previous = q.copy()
+        previous[5] = 0.7  # a different split of the same pan + roll
+        qs, ok = six_axis_solutions(robot.dh, T, q[[0]], q[[3]], previous,
+                                    robot.lower, robot.upper)
+        same_arm = np.abs(qs[0, :, :5] - q[:5]).max(axis=1) < 1e-9
+        assert np.any(same_arm & ok[0])
+        for branch in np.flatnonzero(same_arm & ok[0]):
+            assert qs[0, branch, 5] == pytest.approx(0.7, abs=1e-9)
+            dp, dr = pose_error(robot.fk(qs[0, branch]), T)
+            assert dp < 1e-9 and dr < 1e-9
