@@ -227,6 +227,16 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
     }
 
 
+def _floor(x: float, digits: int) -> str:
+    """Rounded down, so a speed that is said to fit does fit."""
+    scale = 10.0**digits
+    return f"{math.floor(x * scale) / scale:.{digits}f}"
+
+
+def _floor_pct(x: float) -> int:
+    return math.floor(100.0 * x)
+
+
 def _pct(x: float) -> str:
     return "   -" if not math.isfinite(x) else f"{100 * x:4.0f}%"
 
@@ -244,8 +254,8 @@ def _report(r: dict[str, Any]) -> str:
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
         if math.isfinite(r["max_speed"]):
-            lines.append(f"  maximum feasible speed {100 * r['max_speed']:.0f}% of real time "
-                         f"(shoot at {r['feasible_fps']:.2f} fps); try --timing scale")
+            lines.append(f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
+                         f"(shoot at {_floor(r['feasible_fps'], 2)} fps); try --timing scale")
         return "\n".join(lines)
     fr = r["frames"]
     lines = [
@@ -254,8 +264,8 @@ def _report(r: dict[str, Any]) -> str:
         f"  timing {r['timing']}: take {r['duration']:.2f} s (shot {r['shot_start']:.2f}-"
         f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
-        f"  maximum feasible speed {100 * r['max_speed']:.0f}% of real time "
-        f"(could be shot at {r['feasible_fps']:.2f} fps)",
+        f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
+        f"(could be shot at {_floor(r['feasible_fps'], 2)} fps)",
         "  axis      position velocity  accel   jerk   run-up   run-out (extent)",
     ]
     for i, name in enumerate(JOINT_NAMES):
