@@ -10,6 +10,7 @@ from camtraj.errors import (
     UnreachableError,
     UnreachableFramesError,
 )
+from camtraj.ik import IKSolution, solve_ik, solve_path
 from camtraj.robot import JOINT_NAMES, Robot
 
 __version__ = "0.1.0"
@@ -17,6 +18,7 @@ __version__ = "0.1.0"
 __all__ = [
     "JOINT_NAMES",
     "CamtrajError",
+    "IKSolution",
     "InfeasibleError",
     "InputError",
     "LimitError",
@@ -26,4 +28,6 @@ __all__ = [
     "UnreachableError",
     "UnreachableFramesError",
     "__version__",
+    "solve_ik",
+    "solve_path",
 ]
