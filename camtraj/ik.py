@@ -22,12 +22,14 @@ search box shrinks to that ball as soon as any feasible point is known. Inside t
 that contains the objective's kinks exactly (r1 = r1_prev, r4 = r4_prev, the box and reach
 boundaries) is zoomed around the best candidates. On smooth paths most frames are settled by a
 certificate instead: when holding track and extend still is feasible and the other axes'
-sensitivity to them is far below their weights, no other point can be cheaper.
+sensitivity to them is far below their weights, no other point can be cheaper. The same
+argument, in extend alone, settles most frames of the 1-D search without probing extend.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -52,6 +54,9 @@ _SMOOTH_TUBE = math.radians(20.0)  # most a revolute axis may move away from its
 _EDGE = 1e-12  # rounding allowance at closed-form boundaries (reach, limits) [-, m, rad]
 _FRONT_BACK = np.array([0.0, math.pi])
 _SIGN2 = np.array([1.0, -1.0])
+_PROBE_OFFSETS = np.geomspace(1e-7, 0.05, 10)  # extend probe around the 1-D search's best [m]
+_EYE3 = np.eye(3)
+_ORTHO_TOL = 1e-6 + 1e-5 * _EYE3  # np.allclose(R.T @ R, I, atol=1e-6)
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,20 @@ class _Bounds:
 # ---------------------------------------------------------------------------------------------
 
 
+# Packed layout of the closed-form solutions of one candidate: each distinct value once
+# (track, extend, 2 rotate, 4 lift, 4 elbow, 8 pan, 8 tilt, 8 roll). Wrapping, limit checks
+# and costs run on these 36 columns instead of the 8 x 8 expanded joint vectors; _IDX maps
+# every branch's joint vector back to its columns.
+_AX = np.array([_TRACK, _EXTEND, *[_ROTATE] * 2, *[_LIFT] * 4, *[_ELBOW] * 4,
+                *[_PAN] * 8, *[_TILT] * 8, *[_ROLL] * 8])
+_IDX = np.array([[0, 2 + i, 4 + 2 * i + j, 1, 8 + 2 * i + j, 12 + b, 20 + b, 28 + b]
+                 for b in range(N_BRANCHES) for i, j in [divmod(b >> 1, 2)]])
+_PAIR = np.repeat(np.arange(4), 2)  # the wrist's two flips share the arm (rotate, elbow)
+_USES = np.zeros((_AX.size, N_BRANCHES))  # _USES[c, b] = 1 where branch b uses column c
+for _b in range(N_BRANCHES):
+    _USES[_IDX[_b], _b] = 1.0
+
+
 def six_axis_solutions(
     dh: DHConstants,
     target: Array,
@@ -125,6 +144,35 @@ def six_axis_solutions(
         ``q`` of shape (N, 8, 8): for each candidate and branch, the joint vector; and the
         feasibility mask of shape (N, 8). Infeasible entries hold NaN or out-of-limit values.
     """
+    packed, ok = _six_axis_packed(dh, target, r1, r4, previous,
+                                  _packed_limits(previous, lower, upper), stretch_margin,
+                                  wrist_margin)
+    return packed[:, _IDX], ok
+
+
+def _packed_limits(previous: Array, lower: Array, upper: Array) -> tuple[Array, ...]:
+    """Previous values and limits per packed column, (36,) or (N, 36), for _six_axis_packed:
+    previous, lower, upper of the revolute columns, then lower and upper with the rounding
+    allowance of all columns."""
+    lo, hi = lower[..., _AX], upper[..., _AX]
+    return (np.asarray(previous, dtype=float)[..., _AX[2:]], lo[..., 2:], hi[..., 2:],
+            lo - _EDGE, hi + _EDGE)
+
+
+def _six_axis_packed(
+    dh: DHConstants,
+    target: Array,
+    r1: ArrayLike,
+    r4: ArrayLike,
+    previous: Array,
+    limits: tuple[Array, ...],
+    stretch_margin: float | Array = 0.0,
+    wrist_margin: float | Array = 0.0,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """:func:`six_axis_solutions` in the packed layout: values (N, 36) and feasibility (N, 8).
+
+    ``limits`` is :func:`_packed_limits` of the previous joint vector and the limits.
+    """
     r1a = np.asarray(r1, dtype=float)
     r4a = np.asarray(r4, dtype=float)
     n = r1a.shape[0]
@@ -143,7 +191,7 @@ def six_axis_solutions(
 
     # rotate: front (arm plane towards W) and back (plane turned by pi, arm reaching over)
     th2f = np.arctan2(dy, dx)
-    if np.any(hor <= 1e-12):  # wrist centre right above the rotate axis: keep the previous
+    if hor.min() <= 1e-12:  # wrist centre right above the rotate axis: keep the previous
         th2f = np.where(hor > 1e-12, th2f, prev_rotate)
     th2 = th2f[:, None] + _FRONT_BACK  # (N, 2)
     rho = hor[:, None] * _SIGN2  # (N, 2) signed horizontal distance in the arm plane
@@ -199,31 +247,20 @@ def six_axis_solutions(
         th6 = np.where(singular[..., None], th6_keep, th6)
         th8 = np.where(singular[..., None], th8_keep, th8)
 
-    shape = (n, 2, 2, 2)
-    q5 = np.empty((*shape, 8))
-    q5[..., _TRACK] = r1a[:, None, None, None]
-    q5[..., _ROTATE] = th2[:, :, None, None]
-    q5[..., _LIFT] = -a[..., None]
-    q5[..., _EXTEND] = r4a[:, None, None, None]
-    q5[..., _ELBOW] = (a - psi)[..., None]
-    q5[..., _PAN] = th6
-    q5[..., _TILT] = th7
-    q5[..., _ROLL] = th8
-    q = q5.reshape(n, N_BRANCHES, 8)
-
-    rev = q[..., 1:]  # every axis after track except extend is revolute: wrap all, restore
-    prev_rev = prev[..., None, 1:] if prev.ndim == 2 else prev[1:]
-    if lower.ndim == 2:  # per-candidate limits broadcast over the branches
-        lower, upper = lower[:, None, :], upper[:, None, :]
-    wrapped = _nearest_equivalent(rev, prev_rev, lower[..., 1:], upper[..., 1:])
-    wrapped[..., _EXTEND - 1] = r4a[:, None]
-    q[..., 1:] = wrapped
-    ok = ((q >= lower - _EDGE) & (q <= upper + _EDGE)).all(axis=-1) & reach_ok[:, None]
-    if np.any(np.asarray(wrist_margin) > 0.0):
-        sin_w = np.sin(np.asarray(wrist_margin, dtype=float)).reshape(-1, 1, 1)
-        wrist_ok = np.broadcast_to((c7abs >= sin_w)[..., None], shape)
-        ok &= wrist_ok.reshape(n, N_BRANCHES)
-    return q, ok
+    packed = np.concatenate([
+        r1a[:, None], r4a[:, None], th2, (-a).reshape(n, 4), (a - psi).reshape(n, 4),
+        th6.reshape(n, 8), th7.reshape(n, 8), th8.reshape(n, 8)], axis=1)
+    prev_rev, lo_rev, hi_rev, lo_e, hi_e = limits
+    # every column after track and extend is revolute: its 2π-equivalent nearest previous
+    packed[:, 2:] = _nearest_equivalent(packed[:, 2:], prev_rev, lo_rev, hi_rev)
+    bad = (packed < lo_e) | (packed > hi_e)
+    ok = (bad @ _USES == 0.0) & reach_ok[:, None]
+    if np.ndim(wrist_margin) == 0:
+        if wrist_margin > 0.0:
+            ok &= (c7abs.reshape(n, 4) >= math.sin(float(wrist_margin)))[:, _PAIR]
+    elif np.max(wrist_margin) > 0.0:
+        ok &= (c7abs.reshape(n, 4) >= np.sin(wrist_margin).reshape(-1, 1))[:, _PAIR]
+    return packed, ok
 
 
 def _nearest_equivalent(x: Array, prev: Array, lo: Array, hi: Array) -> Array:
@@ -254,21 +291,24 @@ class _Region:
     r4_hi: float
     stretch: float
 
-    def ws(self, r1: Array) -> Array:
-        dx = self.W[0] - self.dh.r10 - r1
-        ws: Array = np.sqrt(dx * dx + self.W[1] ** 2 + (self.W[2] - self.dh.r2) ** 2)
-        return ws
+    @functools.cached_property
+    def _reach(self) -> tuple[Any, ...]:
+        """Constants of :meth:`r4_interval` (scalars, or arrays for one region per frame)."""
+        dh = self.dh
+        cm, sm = np.cos(self.stretch), np.sin(self.stretch)
+        return (self.W[0] - dh.r10, self.W[1] ** 2 + (self.W[2] - dh.r2) ** 2, -dh.r6 * cm,
+                (dh.r6 * sm) ** 2, dh.l3 * dh.l3, (dh.r6 - dh.l3) ** 2, dh.r40)
 
     def r4_interval(self, r1: Array) -> tuple[Array, Array]:
         """Extend range [lo, hi] that can reach W from track r1 (empty where lo > hi)."""
-        dh = self.dh
-        ws = self.ws(r1)
-        cm, sm = np.cos(self.stretch), np.sin(self.stretch)
-        dse_min = -dh.r6 * cm + np.sqrt(np.maximum(ws * ws - (dh.r6 * sm) ** 2, 0.0))
-        l_min = np.sqrt(np.maximum(dse_min * dse_min - dh.l3 * dh.l3, 0.0))
-        l_max = np.sqrt(np.maximum(ws * ws - (dh.r6 - dh.l3) ** 2, 0.0))
-        lo = np.maximum(l_min - dh.r40, self.r4_lo)
-        hi = np.minimum(l_max - dh.r40, self.r4_hi)
+        c, perp2, a, b2, l3_2, e2, r40 = self._reach
+        dx = c - r1
+        ws2 = dx * dx + perp2  # squared distance shoulder -> wrist centre
+        dse_min = a + np.sqrt(np.maximum(ws2 - b2, 0.0))
+        l_min = np.sqrt(np.maximum(dse_min * dse_min - l3_2, 0.0))
+        l_max = np.sqrt(np.maximum(ws2 - e2, 0.0))
+        lo = np.maximum(l_min - r40, self.r4_lo)
+        hi = np.minimum(l_max - r40, self.r4_hi)
         return lo, hi
 
     def r1_kinks(self, r4: float) -> list[float]:
@@ -337,26 +377,31 @@ class _Problem:
         self.best_q: Array | None = None
         self.best_cost = math.inf
         self.best_branch = -1
+        self._prev_packed = previous[_AX]
+        self._limits = _packed_limits(previous, bounds.lower, bounds.upper)
+        self._cost_matrix = _USES * self.w[_AX, None]  # (36, 8): F of each branch
         self.evaluations = 0
         self.calls = 0
         self.near_line = False
+        self.probe_shift = math.inf  # how far the extend probe moved the best point [m]
 
     def evaluate(self, r1: Array, r4: Array) -> tuple[Array, Array]:
-        """Cost (N, 8) with inf where infeasible, and q (N, 8, 8). Records the best."""
+        """Cost (N, 8) with inf where infeasible, and the packed solutions (N, 36) (branch
+        ``br``'s joint vectors are ``packed[:, _IDX[br]]``). Records the best."""
         b = self.bounds
-        q, ok = six_axis_solutions(self.robot.dh, self.target, r1, r4, self.prev,
-                                   b.lower, b.upper, b.stretch_margin, b.wrist_margin)
+        packed, ok = _six_axis_packed(self.robot.dh, self.target, r1, r4, self.prev,
+                                      self._limits, b.stretch_margin, b.wrist_margin)
         if b.branch is not None:
             ok = ok & (np.arange(N_BRANCHES) == b.branch)
-        cost = np.where(ok, np.abs(q - self.prev) @ self.w, np.inf)
+        cost = np.where(ok, np.abs(packed - self._prev_packed) @ self._cost_matrix, np.inf)
         self.evaluations += r1.shape[0]
         self.calls += 1
         flat = int(np.argmin(cost))
         c = float(cost.flat[flat])
         if c < self.best_cost:
             i, br = divmod(flat, N_BRANCHES)
-            self.best_cost, self.best_q, self.best_branch = c, q[i, br].copy(), br
-        return cost, q
+            self.best_cost, self.best_q, self.best_branch = c, packed[i, _IDX[br]], br
+        return cost, packed
 
     def ball(self) -> float:
         """Half-width [m] of the box that must hold the optimum (prismatic cost alone)."""
@@ -412,7 +457,7 @@ class _Problem:
         r4_pts[4 * nk: 5 * nk] += h
         if not ok_curve[:nk].any() and not ok_curve[5 * nk:].any():
             return False
-        cost, _ = self.evaluate(r1_pts, r4_pts)
+        cost, packed = self.evaluate(r1_pts, r4_pts)
         f = cost.min(axis=1)
         f_kink, f_grid = f[:nk], f[5 * nk:]
         samples_r1, samples_f = [kinks_a, grid], [f_kink, f_grid]
@@ -445,6 +490,8 @@ class _Problem:
         )
         if not at_kink:
             self._zoom_line(all_r1, all_f)
+        elif self._extend_flat(cost[k::nk][[0, 3, 4]], packed[k::nk][[0, 3, 4]], h):
+            return True
         if self._extend_sensitivity_ok():
             return True
         self.near_line = True  # the optimum is off the held-extend curve, but close to it
@@ -472,6 +519,40 @@ class _Problem:
             step = (hi - lo) / 8
             lo, hi = max(pts[j] - step, lo), min(pts[j] + step, hi)
 
+    def _extend_flat(self, cost: Array, packed: Array, h: float) -> bool:
+        """The extend probe's question settled by a certificate at a kink of the 1-D search.
+
+        Row 0 of ``cost`` / ``packed`` is the best point (r1*, r4*), rows 1, 2 the same track
+        with extend -h, +h. At fixed track, a point r4 beats F* only if the extend it moves
+        away from the previous value, w_extend * |r4 - r4*| (r4* is the previous extend or
+        the end of its reach interval, beyond which nothing is feasible), is less than the
+        revolute part of F*: the competing interval has that radius. As for the vertex
+        certificate, when it is small and the revolute slopes there are far below w_extend
+        (or too shallow to dip below F* within it), no extend value is cheaper.
+        """
+        q = self.best_q
+        fstar = float(cost[0].min())
+        if q is None or not math.isfinite(fstar) or self.best_cost != fstar:
+            return False
+        w4 = float(self.w[_EXTEND])
+        prism = (self.w[_TRACK] * abs(q[_TRACK] - self.prev[_TRACK])
+                 + w4 * abs(q[_EXTEND] - self.prev[_EXTEND]))
+        radius = max(fstar - prism, 0.0) / w4
+        if w4 <= 0 or radius > _FAST_RADIUS:
+            return False
+        wr = self.w * REVOLUTE
+        for br in range(N_BRANCHES):
+            if not math.isfinite(cost[0, br]):
+                continue
+            fin = np.isfinite(cost[1:, br])
+            qb = packed[:, _IDX[br]]
+            g = float(np.max(np.where(fin, np.abs(qb[1:] - qb[0]) @ wr / h, 0.0)))
+            if g <= _CERT_SAFETY * w4:
+                continue
+            if g < w4 or (cost[0, br] - fstar) < (g - w4) * radius:
+                return False
+        return True
+
     def _extend_sensitivity_ok(self) -> bool:
         """Check the reduction at the best point: no extend value nearby is cheaper.
 
@@ -483,10 +564,11 @@ class _Problem:
             return False
         q0 = self.best_q
         f0 = self.best_cost
-        offsets = np.geomspace(1e-7, 0.05, 10)
+        offsets = _PROBE_OFFSETS
         r4 = np.concatenate([q0[_EXTEND] - offsets, q0[_EXTEND] + offsets])
         r1 = np.full(r4.shape, q0[_TRACK])
         self.evaluate(r1, r4)
+        self.probe_shift = abs(float(self.best_q[_EXTEND]) - float(q0[_EXTEND]))
         return self.best_cost >= f0 - 1e-9 * max(1.0, f0)
 
     # -- the vertex certificate (hold track and extend) ------------------------------------
@@ -515,7 +597,8 @@ class _Problem:
                 continue
             # one-sided slopes where a stencil point is infeasible (that side is blocked)
             fin = np.isfinite(cost[:, br])
-            slopes = np.abs(q[1:, br] - q[0, br]) @ wr / h
+            qb = q[:, _IDX[br]]
+            slopes = np.abs(qb[1:] - qb[0]) @ wr / h
             g = float(np.max(np.where(fin[1:], slopes, 0.0)))
             if g <= _CERT_SAFETY * self.w_min:
                 continue
@@ -553,15 +636,22 @@ class _Problem:
             lo, hi = self.region.r4_interval(np.array([r1b]))
             lo_b, hi_b = max(lo[0], r4p - ball), min(hi[0], r4p + ball)
             tb = (r4b - lo_b) / (hi_b - lo_b) if hi_b > lo_b else 0.0
-            windows = [(r1b, min(max(tb, 0.0), 1.0), w1_0, wt_0)]
+            # the extend probe found the cheaper point this far off the curve: start the zoom
+            # at that scale (a window whose best lands on its edge still follows and grows)
+            s = 5.0 * self.probe_shift
+            wt = min(wt_0, s / (hi_b - lo_b)) if hi_b > lo_b else wt_0
+            windows = [(r1b, min(max(tb, 0.0), 1.0), min(w1_0, s), wt)]
         else:
             coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
             windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
         history: list[float] = []
+        quiet, rel = (3, 1e-6) if self.near_line else (4, 1e-8)
         for rnd in range(60):
-            # stop when three rounds improved the best by less than a part in 1e8
+            # stop when three rounds improved the best by less than a part in 1e8 (when
+            # zooming in on the 1-D search's best point, which is within ~1e-4 of the optimum
+            # already: two rounds, a part in 1e6)
             history.append(self.best_cost)
-            if len(history) > 3 and history[-4] - history[-1] <= 1e-8 * history[-1]:
+            if len(history) > quiet and history[-quiet] - history[-1] <= rel * history[-1]:
                 break
             # the cost moves at most ~2 w_min per metre of prismatic motion: stop when the
             # windows are too small to change it by a millionth
@@ -603,34 +693,28 @@ class _Problem:
         Returns the best (r1, t, cost) of each window (None where nothing is feasible), or
         with ``ranked`` the best ``ranked`` distinct (r1, t) columns of the first window.
         """
-        r1_all, r4_all, t_all, g_all = [], [], [], []
-        for g, (r1s, (t0, t1)) in enumerate(zip(cols, windows, strict=True)):
-            r1s = r1s[(r1s >= self.region.r1_lo) & (r1s <= self.region.r1_hi)]
-            lo, hi = self.region.r4_interval(r1s)
-            lo = np.maximum(lo, r4p - ball)
-            hi = np.minimum(hi, r4p + ball)
-            sel = lo <= hi
-            r1s, lo, hi = r1s[sel], lo[sel], hi[sel]
-            if r1s.size == 0:
-                continue
-            ts = np.concatenate([np.linspace(max(t0, 0.0), min(t1, 1.0), n4), [0.0, 1.0]])
-            span = hi - lo
-            r4 = lo[:, None] + span[:, None] * ts[None, :]
-            held = np.minimum(np.maximum(r4p, lo), hi)
-            r4 = np.concatenate([r4, held[:, None]], axis=1)
-            safe_span = np.where(span > 0, span, 1.0)[:, None]
-            t = np.where(span[:, None] > 0, (r4 - lo[:, None]) / safe_span, 0.0)
-            r1_all.append(np.broadcast_to(r1s[:, None], r4.shape).ravel())
-            r4_all.append(r4.ravel())
-            t_all.append(t.ravel())
-            g_all.append(np.full(r4.size, g))
         out: list[Any] = [None] * len(cols)
-        if not r1_all:
+        grp = np.repeat(np.arange(len(cols)), [c.size for c in cols])
+        r1s = np.concatenate(cols)
+        lo, hi = self.region.r4_interval(r1s)
+        lo = np.maximum(lo, r4p - ball)
+        hi = np.minimum(hi, r4p + ball)
+        sel = (r1s >= self.region.r1_lo) & (r1s <= self.region.r1_hi) & (lo <= hi)
+        if not sel.any():
             return [] if ranked else out
-        r1 = np.concatenate(r1_all)
-        r4 = np.concatenate(r4_all)
-        t = np.concatenate(t_all)
-        grp = np.concatenate(g_all)
+        r1s, lo, hi, grp = r1s[sel], lo[sel], hi[sel], grp[sel]
+        # rows of each window (normalised extend), then the interval ends and the held extend
+        ts = np.array([np.linspace(max(t0, 0.0), min(t1, 1.0), n4) for t0, t1 in windows])
+        ts = np.concatenate([ts, np.zeros((len(cols), 1)), np.ones((len(cols), 1))], axis=1)
+        span = hi - lo
+        r4 = lo[:, None] + span[:, None] * ts[grp]
+        held = np.minimum(np.maximum(r4p, lo), hi)
+        r4 = np.concatenate([r4, held[:, None]], axis=1)
+        safe_span = np.where(span > 0, span, 1.0)[:, None]
+        t = np.where(span[:, None] > 0, (r4 - lo[:, None]) / safe_span, 0.0).ravel()
+        r1 = np.repeat(r1s, r4.shape[1])
+        grp = np.repeat(grp, r4.shape[1])
+        r4 = r4.ravel()
         cost, _ = self.evaluate(r1, r4)
         best = cost.min(axis=1)
         if ranked:
@@ -937,10 +1021,13 @@ def _check_target(target: ArrayLike) -> Array:
     if T.shape != (4, 4):
         msg = f"target must be a 4x4 pose, got shape {T.shape}"
         raise ValueError(msg)
-    if not np.all(np.isfinite(T)):
+    if not np.isfinite(T).all():
         raise UnreachableError("the target pose contains NaN or infinity", miss=math.inf)
     R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    # orthonormal (as np.allclose(R.T @ R, I, atol=1e-6)) and not mirrored (det > 0)
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if not (np.abs(R.T @ R - _EYE3) <= _ORTHO_TOL).all() or det < 0:
         msg = "target rotation is not a proper rotation matrix (scaled, sheared or mirrored)"
         raise ValueError(msg)
     return T
