@@ -513,11 +513,10 @@ def bench_batch(quick: bool, est_shot_s: float) -> dict[str, Any]:
         return {"skipped": f"bench_batch.py does not import: {type(exc).__name__}: {exc}"}
     if not hasattr(module, "run"):
         return {"skipped": "bench/bench_batch.py has no run()"}
-    # size the batch to a time budget: jobs 1 + jobs 2 cost about 1.5 x the serial time
-    budget = 20.0 if quick else 40.0
+    # the setting: 20 copies of a 10-second shot (fewer with --quick)
     frames = 120 if quick else 240
-    copies = int(max(4, min(20, budget / (1.5 * max(est_shot_s, 1e-3)))))
-    repeats = 1 if quick or copies * est_shot_s * 1.5 * 3 > budget else 3
+    copies = 8 if quick else 20
+    repeats = 1 if quick or copies * est_shot_s * 1.5 * 3 > 120.0 else 3
     log(f"table 4: bench_batch.run(copies={copies}, frames={frames}, repeats={repeats})")
     try:
         result = module.run(lambda s: log(f"table 4: {s}"), copies=copies, frames=frames,
