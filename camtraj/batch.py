@@ -575,20 +575,13 @@ def run_batch(
 @click.pass_context
 def batch_command(
     ctx: click.Context,
+    /,
     shots: tuple[str, ...],
     outdir: str,
     jobs: int | None,
     force: bool,
-    camera: str | None,
-    robot: str | None,
-    placement: str | None,
-    frames: str | None,
-    rate: float,
-    timing: str,
-    set_file: str | None,
-    start_from: str | None,
-    objective: str | None,
     quiet: bool,
+    **option_args: Any,
 ) -> None:
     """Convert many SHOTS in parallel into OUTDIR, skipping shots that are up to date.
 
@@ -597,17 +590,7 @@ def batch_command(
     """
     start_workers_early()
     try:
-        options = build_options(
-            camera=camera,
-            robot=robot,
-            placement=placement,
-            frames=frames,
-            rate=rate,
-            timing=timing,
-            set_file=set_file,
-            start_from=start_from,
-            objective=objective,
-        )
+        options = build_options(**option_args)
         report = run_batch(
             shots,
             outdir,

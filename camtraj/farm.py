@@ -575,6 +575,7 @@ def farm_group() -> None:
 @click.pass_context
 def export_command(
     ctx: click.Context,
+    /,
     job_format: str,
     shots: tuple[str, ...],
     job_file: str,
@@ -584,15 +585,7 @@ def export_command(
     name: str | None,
     show: str | None,
     cue_shot: str | None,
-    camera: str | None,
-    robot: str | None,
-    placement: str | None,
-    frames: str | None,
-    rate: float,
-    timing: str,
-    set_file: str | None,
-    start_from: str | None,
-    objective: str | None,
+    **option_args: Any,
 ) -> None:
     """Write a farm job that converts SHOTS, one task per shot.
 
@@ -604,17 +597,7 @@ def export_command(
     Each task writes OUTDIR/NAME.mcap and NAME.summary.json for a shot NAME.usd*.
     """
     try:
-        options = build_options(
-            camera=camera,
-            robot=robot,
-            placement=placement,
-            frames=frames,
-            rate=rate,
-            timing=timing,
-            set_file=set_file,
-            start_from=start_from,
-            objective=objective,
-        )
+        options = build_options(**option_args)
         if job_format == "openjd":
             path = export_openjd(
                 shots,
