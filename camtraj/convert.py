@@ -26,7 +26,7 @@ from camtraj.ik import PathSolution, solve_path_report
 from camtraj.mcap_io import TakeData, write_take
 from camtraj.options import ConvertOptions
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
-from camtraj.timing import Limits, Take, TimingLimitError, time_shot
+from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
@@ -328,7 +328,6 @@ __all__ = [
     "Analysis",
     "ConvertOptions",
     "Placement",
-    "TimingLimitError",
     "analyse",
     "convert",
     "summary",
