@@ -233,14 +233,6 @@ class _Cdr:
         for value in values:
             self.string(value)
 
-    def f64s(self, values: ArrayLike) -> None:
-        """A float64[] sequence: length, then the values."""
-        arr = np.asarray(values, dtype="<f8").ravel()
-        self.u32(arr.size)
-        if arr.size:
-            self._align(8)
-            self.buf += arr.tobytes()
-
     def slot(self, key: str, dtype: str, count: int = 1) -> None:
         """Reserve ``count`` values of ``dtype`` (e.g. ``"<f8"``) to be filled per message."""
         size = np.dtype(dtype).itemsize
