@@ -594,6 +594,11 @@ class _FramePath:
                 xs = x[a:b]
                 for k in range(1, _MAX_DEGREE + 1):
                     coef[a:b, k, j] = spline(xs, nu=k) / math.factorial(k)
+                # The spline meets its start conditions only to round-off (how close depends
+                # on the CPU's floating-point kernels); write them exactly, so that an axis
+                # leaving a hold starts from exactly zero velocity and acceleration.
+                coef[a, 1, j] = left[0]
+                coef[a, 2, j] = 0.5 * left[1]
         return cls(coef=coef, q_frames=q, dt=dt, still=still)
 
     @property

@@ -265,7 +265,10 @@ def test_hold_then_move_stays_exactly_still(limits: Limits) -> None:
     take = time_shot(q, t, limits, mode="scale")
     a, b = take.frame_samples[0], take.frame_samples[24]  # frames 0..24: every axis holds
     assert np.all(take.q[a : b + 1] == HOME)
+    # Exact by construction: hold pieces are constant and the move's first piece starts from
+    # the hold's velocity and acceleration written as such (not as the spline's round-off).
     assert np.all(take.qd[a : b + 1] == 0.0)
+    assert np.all(take.qdd[a : b + 1] == 0.0)
     assert take.report.runup["duration"] == 0.0  # the shot begins at rest
     assert take.shot_start == 0.0
     # After the move the axes hold still again, exactly at the last solution.
