@@ -266,8 +266,10 @@ def _report(r: dict[str, Any]) -> str:
         f"servo {r['servo_rate_hz']:.1f} Hz",
         f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
         f"(could be shot at {_floor(r['feasible_fps'], 2)} fps)",
-        "  axis      position velocity  accel   jerk   run-up   run-out (extent)",
+        "  axis      position velocity  accel   jerk   run-up   run-out (extent)"
+        "   margin  to start",
     ]
+    margins, start = r["margins"], r["move_to_start"]
     for i, name in enumerate(JOINT_NAMES):
         use = r["peak_use"].get(name, {})
         unit = "deg" if REVOLUTE[i] else "m"
@@ -276,8 +278,15 @@ def _report(r: dict[str, Any]) -> str:
         lines.append(
             f"  {name:<8} {_pct(use.get('position', math.nan))}    "
             f"{_pct(use.get('velocity', math.nan))}   {_pct(use.get('acceleration', math.nan))}"
-            f"  {_pct(use.get('jerk', math.nan))}  {up:7.3f}  {out:7.3f} {unit}"
+            f"  {_pct(use.get('jerk', math.nan))}  {up:7.3f}  {out:7.3f} {unit:<3}"
+            f" {margins['to_limits'][name]:8.3f} {start['extent'][name]:8.3f}"
         )
+    lines.append(f"  margin: wrist singularity {margins['wrist_singularity_deg']:.1f} deg (frame "
+                 f"{margins['wrist_singularity_frame']}), full stretch "
+                 f"{margins['full_stretch_deg']:.1f} deg (frame {margins['full_stretch_frame']}); "
+                 f"margin column: nearest position limit")
+    lines.append(f"  move to start: {start['duration_s']:.2f} s from the start pose (to start "
+                 f"column: travel per axis)")
     lines.append(f"  run-up {r['runup']['duration_s']:.2f} s, run-out "
                  f"{r['runout']['duration_s']:.2f} s")
     lines += [f"  warning: {w}" for w in r["warnings"]]

@@ -257,12 +257,8 @@ def summary(
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     rep = take.report
-    relaxed_margin = shot.frames[~path.within_margins].tolist()
     relaxed_step = shot.frames[~path.within_step].tolist()
     warnings = list(rep.warnings)
-    if relaxed_margin:
-        warnings.append(f"{len(relaxed_margin)} frame(s) needed the hard joint limits "
-                        f"(smooth margins relaxed): first {relaxed_margin[0]}")
     if relaxed_step and take.mode == "shot":
         warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
                         f"limit between frames: first {relaxed_step[0]}")
@@ -293,10 +289,39 @@ def summary(
         "feasible_fps": float(rep.feasible_fps),
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup),
+        "move_to_start": _move_to_start(path),
+        "margins": _margins(path, shot.frames),
         "runout": extents(rep.runout),
         "warnings": warnings,
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
+    }
+
+
+def _move_to_start(path: PathSolution) -> dict[str, Any]:
+    """The move from the start (home or --start-from) to the first frame, for the summary."""
+    m = path.move_to_start
+    return {
+        "duration_s": m.duration,
+        "start": {k: _axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.start, strict=True)},
+        "extent": {k: _axis_value(k, abs(float(v)))
+                   for k, v in zip(JOINT_NAMES, m.travel, strict=True)},
+    }
+
+
+def _margins(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
+    """Smallest distances to the position limits (per axis), the wrist singularity and full
+    stretch over the shot, with the film frame where each occurs (degrees / metres)."""
+    m = path.margins
+    return {
+        "to_limits": {k: _axis_value(k, float(v))
+                      for k, v in zip(JOINT_NAMES, m.to_limits, strict=True)},
+        "to_limits_frame": {k: int(frames[i])
+                            for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)},
+        "wrist_singularity_deg": math.degrees(m.wrist),
+        "wrist_singularity_frame": int(frames[m.wrist_frame]),
+        "full_stretch_deg": math.degrees(m.stretch),
+        "full_stretch_frame": int(frames[m.stretch_frame]),
     }
 
 

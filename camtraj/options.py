@@ -17,7 +17,7 @@ import click
 from camtraj.errors import InputError
 
 TIMING_MODES = ("shot", "scale", "optimal")
-OBJECTIVES = ("smooth", "paper")
+OBJECTIVES = ("shot", "paper")
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -34,7 +34,7 @@ class ConvertOptions:
         rate: Requested servo rate [Hz].
         timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
         start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
-        objective: IK objective override (``"smooth"`` or ``"paper"``).
+        objective: IK objective override (``"shot"`` or ``"paper"``).
     """
 
     camera: str | None = None

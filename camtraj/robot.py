@@ -91,22 +91,34 @@ class ControllerUnits:
 
 @dataclass(frozen=True)
 class IKSettings:
-    """How the redundancy (track, extend) is resolved.
+    """How the redundancy (track, extend) and the branch are chosen (the ``[ik]`` table).
 
-    objective: ``"smooth"`` (margins from full stretch and limits) or ``"paper"``.
-    stretch_margin: minimum elbow angle away from full stretch [rad] (smooth only).
-    wrist_margin: minimum tilt angle away from ±90°, where pan and roll align [rad].
-    smoothing: width (Gaussian sigma) of the track/extend smoothing of a shot [s]; 0 = off.
-    limit_margin: per-joint margin kept inside the position limits [m or rad], shape (8,).
+    objective: ``"shot"`` (whole-shot choice, the default) or ``"paper"`` (the papers'
+        per-frame optimum of the weighted motion F).
+    The rest configure the shot objective (``camtraj.ik.shot_cost`` gives the formula):
+    stretch_margin, wrist_margin: widths of the zones [rad] near full stretch and near the
+        wrist singularity (tilt ±90°) where a margin cost applies.
+    limit_margin_prismatic [m], limit_margin_revolute [rad]: the same near position limits.
+    motion_weight, velocity_weight, overspeed_weight, acceleration_weight, jerk_weight,
+        margin_weight: the weights of the objective's terms.
+    track_samples, extend_samples: the candidate grid per reachable track interval.
+    refine_rounds: most Gauss-Newton steps of the continuous refinement.
     """
 
-    objective: str = "smooth"
+    objective: str = "shot"
     stretch_margin: float = math.radians(20.0)
-    wrist_margin: float = math.radians(15.0)
-    smoothing: float = 0.5
-    limit_margin: Array = field(
-        default_factory=lambda: np.where(PRISMATIC, 0.02, math.radians(2.0))
-    )
+    wrist_margin: float = math.radians(25.0)
+    limit_margin_prismatic: float = 0.1
+    limit_margin_revolute: float = math.radians(25.0)
+    motion_weight: float = 1.0
+    velocity_weight: float = 1.0
+    overspeed_weight: float = 100.0
+    acceleration_weight: float = 1.0
+    jerk_weight: float = 1.0
+    margin_weight: float = 10.0
+    track_samples: int = 3
+    extend_samples: int = 2
+    refine_rounds: int = 4
 
 
 @dataclass(frozen=True)
@@ -343,39 +355,8 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     camera2flange[:3, :3] = rot
     camera2flange[:3, 3] = offset
 
-    ik_tab = _table(data, "ik", where, required=False)
-    _no_unknown(
-        ik_tab,
-        {"objective", "stretch_margin", "wrist_margin", "smoothing", "limit_margin_revolute",
-         "limit_margin_prismatic"},
-        where,
-        "[ik]",
-    )
-    objective = ik_tab.get("objective", "smooth")
-    if objective not in ("smooth", "paper"):
-        raise fail("ik.objective", f"= {objective!r}: must be \"smooth\" or \"paper\"")
-    stretch = _number(ik_tab.get("stretch_margin", math.radians(20.0) / ang),
-                      "ik.stretch_margin", where) * ang
-    if not 0.0 <= stretch <= math.radians(60):
-        raise fail("ik.stretch_margin", "must be between 0 and 60 deg")
-    wrist = _number(ik_tab.get("wrist_margin", math.radians(15.0) / ang),
-                    "ik.wrist_margin", where) * ang
-    if not 0.0 <= wrist <= math.radians(45):
-        raise fail("ik.wrist_margin", "must be between 0 and 45 deg")
-    smoothing = _number(ik_tab.get("smoothing", 0.5), "ik.smoothing", where)
-    if not 0.0 <= smoothing <= 5.0:
-        raise fail("ik.smoothing", f"= {smoothing}: must be between 0 and 5 s")
-    m_rev = _number(ik_tab.get("limit_margin_revolute", math.radians(2.0) / ang),
-                    "ik.limit_margin_revolute", where) * ang
-    m_pri = _number(ik_tab.get("limit_margin_prismatic", 0.02), "ik.limit_margin_prismatic", where)
-    if not (0.0 <= m_rev <= math.radians(30) and 0.0 <= m_pri <= 0.5):
-        raise fail("ik", "limit margins must be within [0, 30 deg] and [0, 0.5 m]")
+    ik = _ik_settings(_table(data, "ik", where, required=False), ang, where)
     lower, upper = np.array(cols["min"]), np.array(cols["max"])
-    margin = np.where(PRISMATIC, m_pri, m_rev)
-    if np.any(2 * margin >= upper - lower):
-        raise fail("ik", "limit margins leave no room inside an axis's limits")
-    ik = IKSettings(objective=objective, stretch_margin=stretch, wrist_margin=wrist,
-                    smoothing=smoothing, limit_margin=margin)
 
     controller: dict[str, ControllerUnits] = {}
     ctab = _table(data, "controller", where, required=False)
@@ -411,6 +392,52 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         controller=controller,
         source=source,
     )
+
+
+_IK_RANGES: dict[str, tuple[float, float, str]] = {
+    # key: (min, max, unit) with unit "angle" (the file's angle unit), "m", "" or "int"
+    "stretch_margin": (math.radians(0.1), math.radians(60.0), "angle"),
+    "wrist_margin": (math.radians(0.1), math.radians(60.0), "angle"),
+    "limit_margin_revolute": (math.radians(0.1), math.radians(60.0), "angle"),
+    "limit_margin_prismatic": (1e-3, 1.0, "m"),
+    "motion_weight": (0.0, 1e4, ""),
+    "velocity_weight": (0.0, 1e4, ""),
+    "overspeed_weight": (0.0, 1e6, ""),
+    "acceleration_weight": (0.0, 1e4, ""),
+    "jerk_weight": (0.0, 1e4, ""),
+    "margin_weight": (0.0, 1e4, ""),
+    "track_samples": (1, 16, "int"),
+    "extend_samples": (1, 16, "int"),
+    "refine_rounds": (0, 100, "int"),
+}
+
+
+def _ik_settings(tab: dict[str, Any], ang: float, where: str) -> IKSettings:
+    """The ``[ik]`` table; every value range-checked, angles in the file's unit."""
+    _no_unknown(tab, {"objective", *_IK_RANGES}, where, "[ik]")
+    objective = tab.get("objective", "shot")
+    if objective not in ("shot", "paper"):
+        msg = f"{where}: [ik.objective] = {objective!r}: must be \"shot\" or \"paper\""
+        raise RobotFileError(msg)
+    defaults = IKSettings()
+    values: dict[str, Any] = {"objective": objective}
+    for key, (lo, hi, unit) in _IK_RANGES.items():
+        scale = ang if unit == "angle" else 1.0
+        default = getattr(defaults, key)
+        if key not in tab:
+            values[key] = default
+            continue
+        val = _number(tab[key], f"ik.{key}", where)
+        if unit == "int" and val != int(val):
+            msg = f"{where}: [ik.{key}] = {tab[key]!r}: must be a whole number"
+            raise RobotFileError(msg)
+        val *= scale
+        if not lo <= val <= hi:
+            shown = f"{lo / scale:g} and {hi / scale:g}"
+            msg = f"{where}: [ik.{key}] = {tab[key]!r}: must be between {shown}"
+            raise RobotFileError(msg)
+        values[key] = int(val) if unit == "int" else val
+    return IKSettings(**values)
 
 
 def _table(data: dict[str, Any], key: str, where: str, *, required: bool) -> dict[str, Any]:

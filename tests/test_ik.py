@@ -10,6 +10,7 @@ import pytest
 import camtraj
 from camtraj import Robot, UnreachableError, UnreachableFramesError
 from camtraj.ik import motion_cost, six_axis_solutions, solve_ik, solve_path, traverse
+from camtraj.robot import PRISMATIC
 
 from .conftest import camera_path, pose_error
 from .test_robot import GA_EQ16, GA_TARGET
@@ -31,7 +32,7 @@ def test_closed_form_contains_every_configuration(robot: Robot) -> None:
 
 
 def test_ga_case_beats_the_published_optimum(robot: Robot) -> None:
-    sol = camtraj.solve_ik(robot, GA_TARGET, np.zeros(8), objective="paper")  # public API
+    sol = camtraj.solve_ik(robot, GA_TARGET, np.zeros(8))  # public API
     dp, dr = pose_error(robot.fk(sol.q), GA_TARGET)
     assert dp < 1e-9 and dr < 1e-9
     assert robot.within_limits(sol.q)
@@ -41,14 +42,14 @@ def test_ga_case_beats_the_published_optimum(robot: Robot) -> None:
     assert sol.cost == pytest.approx(motion_cost(robot, sol.q, np.zeros(8)))
     # the issue's dense traversal with extend up to 1.5 m finds F ~ 48 060
     assert sol.cost == pytest.approx(48060, abs=5)
-    brute = traverse(robot, GA_TARGET, np.zeros(8), objective="paper")
+    brute = traverse(robot, GA_TARGET, np.zeros(8))
     assert abs(sol.cost - brute.cost) <= 1e-3 * brute.cost
 
 
 def _random_reachable(robot: Robot, n: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    m = robot.ik.limit_margin
-    q = rng.uniform(robot.lower + 2 * m, robot.upper - 2 * m, size=(n, 8))
+    m = np.where(PRISMATIC, 0.04, math.radians(4.0))
+    q = rng.uniform(robot.lower + m, robot.upper - m, size=(n, 8))
     return robot.fk(q)
 
 
@@ -107,14 +108,13 @@ def _workspace_poses(robot: Robot, n: int) -> np.ndarray:
     return np.array(out[:n])
 
 
-@pytest.mark.parametrize("objective", ["paper", "smooth"])
-def test_optimal_over_the_workspace(robot: Robot, objective: str) -> None:
+def test_optimal_over_the_workspace(robot: Robot) -> None:
     poses = _workspace_poses(robot, 30)
     assert len(poses) >= 27
     start = robot.home
     for T in poses:
-        sol = solve_ik(robot, T, start, objective=objective)
-        brute = traverse(robot, T, start, objective=objective,
+        sol = solve_ik(robot, T, start)
+        brute = traverse(robot, T, start,
                          radius=sol.cost / W_MIN * 1.001 + 1e-6, n1=161, n4=61)
         assert sol.cost <= brute.cost * (1 + 1e-3) + 1e-9
         # and the traversal is dense enough to be a meaningful reference
@@ -127,46 +127,10 @@ def test_optimal_on_every_frame_of_a_smooth_path(robot: Robot) -> None:
     prev = robot.home
     for i, T in enumerate(targets):
         cost = float(motion_cost(robot, q[i], prev))
-        brute = traverse(robot, T, prev, objective="paper",
+        brute = traverse(robot, T, prev,
                          radius=cost / W_MIN * 1.001 + 1e-6, n1=41, n4=21, refine=3)
         assert cost <= brute.cost * (1 + 1e-3) + 1e-9, f"frame {i}"
         prev = q[i]
-
-
-def test_smooth_path_has_no_branch_flips(robot: Robot) -> None:
-    dt = 1 / 24
-    targets = camera_path(robot, 240)
-    q = solve_path(robot, targets, frame_interval=dt)
-    dp, dr = pose_error(robot.fk(q), targets)
-    assert dp < 1e-9 and dr < 1e-9
-    steps = np.abs(np.diff(q, axis=0))
-    # within one frame's travel at each axis's velocity limit
-    assert np.all(steps <= robot.max_velocity * dt + 1e-12)
-    # and really small: a flip moves pan/roll by ~pi, the elbow by tenths of a radian
-    assert steps[:, 1:].max() < 0.1
-    # the path keeps its distance from full stretch and the wrist singularity
-    frames = robot.link_frames(q)
-    wrist = frames[:, 6, :3, 3]
-    elbow = frames[:, 4, :3, 3]
-    shoulder = frames[:, 2, :3, 3]
-    se = np.linalg.norm(elbow - shoulder, axis=1)
-    ew = np.linalg.norm(wrist - elbow, axis=1)
-    sw = np.linalg.norm(wrist - shoulder, axis=1)
-    interior = np.arccos((se**2 + ew**2 - sw**2) / (2 * se * ew))
-    assert np.all(math.pi - interior >= robot.ik.stretch_margin - 1e-9)
-    assert np.all(np.abs(np.cos(q[:, 6])) >= math.sin(robot.ik.wrist_margin) - 1e-9)
-
-
-def test_paper_objective_rides_full_stretch_smooth_keeps_margin(robot: Robot) -> None:
-    """Why the smooth default exists: the paper objective ends on the elbow singularity."""
-    paper = solve_ik(robot, GA_TARGET, np.zeros(8), objective="paper")
-    smooth = solve_ik(robot, GA_TARGET, np.zeros(8), objective="smooth")
-    for sol, expect_stretched in ((paper, True), (smooth, False)):
-        f = robot.link_frames(sol.q)
-        s, e, w = f[2, :3, 3], f[4, :3, 3], f[6, :3, 3]
-        stretched = np.linalg.norm(w - s) >= np.linalg.norm(e - s) + robot.dh.r6 - 1e-6
-        assert stretched == expect_stretched
-    assert smooth.cost > paper.cost
 
 
 def test_wrist_singularity_keeps_the_previous_pan(robot: Robot) -> None:

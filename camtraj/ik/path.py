@@ -1,0 +1,257 @@
+"""A whole shot solved: the ``shot`` objective (default) or the papers' per-frame ``paper``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.errors import UnreachableError, UnreachableFramesError
+from camtraj.ik.closed_form import EXTEND, TRACK
+from camtraj.ik.margins import PathMargins, path_margins
+from camtraj.ik.refine import refine
+from camtraj.ik.shot import Candidates, candidates, choose, measures
+from camtraj.ik.shot_cost import ShotCost
+from camtraj.ik.sm import check_joints, check_target, solve_ik
+from camtraj.robot import Robot
+
+Array = NDArray[np.float64]
+
+OBJECTIVES = ("shot", "paper")
+
+
+@dataclass(frozen=True)
+class MoveToStart:
+    """The move from the start (home or ``--start-from``) to the shot's first frame.
+
+    Attributes:
+        start: Start joint vector (8,) [m, rad].
+        travel: First frame minus start (8,) [m, rad]; the move's extent on each axis (a
+            rest-to-rest move of one axis does not overshoot).
+        duration: Time of the slowest axis's fastest rest-to-rest move within its velocity,
+            acceleration and jerk limits [s] (all axes synchronised to it).
+    """
+
+    start: Array
+    travel: Array
+    duration: float
+
+
+@dataclass(frozen=True)
+class PathSolution:
+    """A solved shot.
+
+    Attributes:
+        q: Joint path (n, 8) [m, rad].
+        cost: F of each frame against the frame before (n,); the first against the start.
+        within_step: (n,) False where a step from the previous frame exceeds an axis's
+            velocity limit times the frame interval (always True without a frame interval).
+        objective: ``"shot"`` or ``"paper"``.
+        move_to_start: The move from the start to the first frame.
+        margins: The smallest distances to limits and singularities over the shot.
+    """
+
+    q: Array
+    cost: Array
+    within_step: NDArray[np.bool_]
+    objective: str
+    move_to_start: MoveToStart
+    margins: PathMargins
+
+
+def solve_path(
+    robot: Robot,
+    targets: ArrayLike,
+    start: ArrayLike | None = None,
+    *,
+    objective: str | None = None,
+    frame_interval: float | None = None,
+    frame_numbers: ArrayLike | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> Array:
+    """The joint path (n, 8) of :func:`solve_path_report`."""
+    return solve_path_report(robot, targets, start, objective=objective,
+                             frame_interval=frame_interval, frame_numbers=frame_numbers,
+                             progress=progress).q
+
+
+def solve_path_report(
+    robot: Robot,
+    targets: ArrayLike,
+    start: ArrayLike | None = None,
+    *,
+    objective: str | None = None,
+    frame_interval: float | None = None,
+    frame_numbers: ArrayLike | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> PathSolution:
+    """Solve a whole shot.
+
+    Args:
+        robot: The robot.
+        targets: Flange poses in the base frame, shape (n, 4, 4) [m].
+        start: Joint vector (8,) the robot starts from (before its run-up); default home.
+        objective: ``"shot"`` (whole-shot choice, :mod:`camtraj.ik.shot`) or ``"paper"`` (the
+            papers' per-frame optimum, each frame from the previous one, the first from
+            ``start``); default the robot file's ``[ik] objective``.
+        frame_interval: Seconds between frames (1 / fps); the shot objective needs it (default
+            1/24 s); with it, ``within_step`` flags steps beyond the velocity limits.
+        frame_numbers: Film frame numbers (n,) used in error messages; default 0..n-1.
+        progress: Called with the number of frames just finished (for a progress bar).
+
+    Raises:
+        ValueError: A malformed argument (named in the message).
+        UnreachableFramesError: One or more frames have no solution; lists every such frame
+            and by how much it misses.
+    """
+    Ts = _check_targets(targets)
+    n = Ts.shape[0]
+    frames = np.arange(n) if frame_numbers is None else np.asarray(frame_numbers)
+    if frames.shape != (n,):
+        msg = f"frame_numbers must have one number per target ({n}), got shape {frames.shape}"
+        raise ValueError(msg)
+    first = robot.home.copy() if start is None else check_joints(start, "start")
+    obj = objective or robot.ik.objective
+    if obj not in OBJECTIVES:
+        msg = f"objective must be one of {', '.join(OBJECTIVES)}, got {obj!r}"
+        raise ValueError(msg)
+    if frame_interval is not None and not (
+            isinstance(frame_interval, int | float) and math.isfinite(frame_interval)
+            and 0.0 < frame_interval <= 60.0):
+        msg = f"frame_interval must be a positive number of seconds (at most 60), got " \
+              f"{frame_interval!r}"
+        raise ValueError(msg)
+    if obj == "shot":
+        q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames)
+        if progress is not None:
+            progress(n)
+    else:
+        q = _solve_sequence(robot, Ts, first, frames, progress)
+    prev = np.vstack([first, q[:-1]])
+    cost = np.abs(q - prev) @ robot.weights
+    steps = np.ones(n, dtype=bool)
+    if frame_interval is not None and n > 1:
+        bound = robot.max_velocity * frame_interval * (1.0 + 1e-9) + 1e-12
+        steps[1:] = np.all(np.abs(np.diff(q, axis=0)) <= bound, axis=1)
+    return PathSolution(q, cost, steps, obj, move_to_start(robot, first, q[0]),
+                        path_margins(robot, q))
+
+
+def _check_targets(targets: ArrayLike) -> Array:
+    Ts = np.asarray(targets, dtype=float)
+    if Ts.ndim != 3 or Ts.shape[1:] != (4, 4) or Ts.shape[0] < 1:
+        msg = f"targets must have shape (n, 4, 4) with n >= 1, got {Ts.shape}"
+        raise ValueError(msg)
+    bad = np.flatnonzero(~np.isfinite(Ts).all(axis=(1, 2)))
+    if bad.size:
+        msg = f"targets must be finite poses: target {int(bad[0])} contains NaN or infinity"
+        raise ValueError(msg)
+    for i in range(0, Ts.shape[0], max(1, Ts.shape[0] // 16)):
+        try:
+            check_target(Ts[i])
+        except ValueError as exc:
+            msg = f"targets[{i}]: {exc}"
+            raise ValueError(msg) from None
+    return Ts
+
+
+def _solve_sequence(robot: Robot, Ts: Array, first: Array, frames: NDArray[np.int_],
+                    progress: Callable[[int], None] | None) -> Array:
+    """The paper objective: frame after frame, each from the previous frame's solution."""
+    n = Ts.shape[0]
+    q = np.full((n, 8), np.nan)
+    errors: list[UnreachableError] = []
+    prev = first
+    for i in range(n):
+        try:
+            sol = solve_ik(robot, Ts[i], prev)
+        except UnreachableError as exc:
+            errors.append(exc.at_frame(int(frames[i])))
+        else:
+            q[i] = prev = sol.q
+        if progress is not None:
+            progress(1)
+    if errors:
+        raise UnreachableFramesError(errors)
+    return q
+
+
+def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
+               frames: NDArray[np.int_]) -> Array:
+    """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`)."""
+    s = robot.ik
+    cost = ShotCost.for_robot(robot, dt)
+    cand = candidates(robot, targets, s.track_samples, s.extend_samples)
+    cand = _rescue_empty_frames(robot, targets, cand, frames)
+    choice = choose(cost, cand, start)
+    if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
+        msg = "internal error: no candidate path through the shot"
+        raise RuntimeError(msg)
+    n = targets.shape[0]
+    rows = np.arange(n)
+    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
+    j = cand.interval[rows, choice.point]
+    lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
+    ref = refine(robot, cost, targets, choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
+                 np.maximum(hi1, x0[:, 0]), rounds=s.refine_rounds)
+    return ref.y[:, :8]
+
+
+def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,
+                         frames: NDArray[np.int_]) -> Candidates:
+    """Frames whose grid missed a thin feasible set get the SM optimum from home as their
+    first candidate; frames with no solution at all are reported together."""
+    empty = np.flatnonzero(~cand.ok.any(axis=(1, 2)))
+    if empty.size == 0:
+        return cand
+    errors: list[UnreachableError] = []
+    r1, r4, y, ok = cand.r1.copy(), cand.r4.copy(), cand.y.copy(), cand.ok.copy()
+    interval = cand.interval.copy()
+    for k in empty:
+        try:
+            sol = solve_ik(robot, targets[k], robot.home)
+        except UnreachableError as exc:
+            errors.append(exc.at_frame(int(frames[k])))
+            continue
+        r1[k, 0], r4[k, 0] = sol.q[TRACK], sol.q[EXTEND]
+        yk, okk = measures(robot, targets[k:k + 1], r1[k, :1], r4[k, :1], robot.home)
+        y[k, 0], ok[k, 0] = yk[0], okk[0]
+        r = sol.q[TRACK]
+        inside = (cand.track_lo[k] <= r + 1e-9) & (r - 1e-9 <= cand.track_hi[k])
+        interval[k, 0] = int(np.argmax(inside))
+    if errors:
+        raise UnreachableFramesError(errors)
+    return Candidates(r1, r4, interval, y, ok, cand.track_lo, cand.track_hi)
+
+
+def move_to_start(robot: Robot, start: Array, q0: Array) -> MoveToStart:
+    """The fastest synchronised rest-to-rest move from ``start`` to ``q0`` (per-axis
+    time-optimal jerk-limited profiles; the slowest axis sets the duration)."""
+    travel = q0 - start
+    durations = [
+        _rest_to_rest(abs(float(d)), float(v), float(a), float(j))
+        for d, v, a, j in zip(travel, robot.max_velocity, robot.max_acceleration,
+                              robot.max_jerk, strict=True)
+    ]
+    return MoveToStart(start.copy(), travel, float(max(durations)))
+
+
+def _rest_to_rest(d: float, v: float, a: float, j: float) -> float:
+    """Shortest time [s] of a rest-to-rest move over distance d within v, a, j (7 segments)."""
+    if d <= 0.0:
+        return 0.0
+    reach_a = v * j >= a * a  # the acceleration limit is reached before the velocity limit
+    to_v = v / a + a / j if reach_a else 2.0 * math.sqrt(v / j)  # time to accelerate to v
+    if d >= v * to_v:  # cruises at v
+        return d / v + to_v
+    if d >= 2.0 * a ** 3 / (j * j):  # peak velocity below v, acceleration reaches a
+        vp = (-a * a / j + math.sqrt(a ** 4 / (j * j) + 4.0 * a * d)) / 2.0
+        return 2.0 * (vp / a + a / j)
+    return 4.0 * math.cbrt(d / (2.0 * j))
+
+
+__all__ = ["OBJECTIVES", "MoveToStart", "PathSolution", "solve_path", "solve_path_report",
+           "solve_shot"]

@@ -1,0 +1,244 @@
+"""Whole-shot redundancy resolution: the ``shot`` objective, the default.
+
+A previs move is known in full before the robot moves, so the redundancy (track, extend) and the
+closed-form branch are chosen for the whole shot, not frame by frame:
+
+1. Candidates. For every frame, a grid over its analytic feasible region (:mod:`region`): track
+   values spread over each of the (at most two) reachable track intervals, and for each of them
+   extend values spread over its reach interval. All frames' candidates are solved in closed
+   form, on all eight branches, in one vectorised call.
+2. Dynamic programme. One candidate per frame for the whole shot, by a shortest path over
+   frames (Viterbi) minimising :class:`ShotCost`'s first-order terms (the papers' weighted
+   motion F, velocity use, a steep penalty beyond the velocity limit) plus its margin terms.
+   A chain keeps one branch label for the whole shot (a label changes only where two branches
+   meet, at a singularity the margins keep away from); if no label reaches every frame, the
+   chains are merged and labels may change wherever the step stays cheap. The first frame is
+   free: the run-up brings the robot there.
+3. Refinement (:mod:`refine`): the chosen track/extend curves move continuously inside each
+   frame's feasible corridor to lower the full objective, acceleration and jerk included, so
+   the answer is not quantised to the grid. Every frame stays an exact closed-form solution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.ik.closed_form import (
+    EXTEND,
+    IDX,
+    N_BRANCHES,
+    TILT,
+    TRACK,
+    packed_limits,
+    six_axis_packed,
+)
+from camtraj.ik.margins import stretch_distance, wrist_distance
+from camtraj.ik.region import Region, track_intervals
+from camtraj.ik.shot_cost import N_MEASURES, ShotCost
+from camtraj.robot import REVOLUTE, Robot
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+_CHUNK = 2_000_000  # pair-cost elements per vectorised block (memory bound, ~16 MB each)
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Every frame's candidate configurations, solved in closed form.
+
+    Attributes:
+        r1, r4: Track and extend of each candidate point (n, G) [m].
+        interval: Which track interval (0 behind, 1 ahead of the target) each point is in (n, G).
+        y: Measures of each point on each branch (n, G, 8, 10): the joint vector (revolute axes
+            nearest home), then the wrist singularity and full-stretch distances [rad].
+        ok: Feasibility (n, G, 8): inside every position limit and reachable.
+        track_lo, track_hi: The reachable track intervals per frame (n, 2) [m].
+    """
+
+    r1: Array
+    r4: Array
+    interval: IntArray
+    y: Array
+    ok: NDArray[np.bool_]
+    track_lo: Array
+    track_hi: Array
+
+
+def candidates(robot: Robot, targets: Array, n_track: int = 4, n_extend: int = 3) -> Candidates:
+    """A grid of ``2 * n_track * n_extend`` points per frame over the feasible region, solved.
+
+    Args:
+        robot: The robot.
+        targets: Flange poses (n, 4, 4) [m].
+        n_track: Track values per reachable interval (at the middles of equal parts).
+        n_extend: Extend values per track value (likewise, over its reach interval).
+    """
+    n = targets.shape[0]
+    wrist = targets[:, :3, 3]
+    lo1, hi1 = track_intervals(robot.dh, wrist, float(robot.lower[TRACK]),
+                               float(robot.upper[TRACK]), float(robot.lower[EXTEND]),
+                               float(robot.upper[EXTEND]))
+    span1 = np.where(lo1 <= hi1, hi1 - lo1, 0.0)
+    u1 = (np.arange(n_track) + 0.5) / n_track
+    r1 = np.where((lo1 <= hi1)[..., None], lo1[..., None] + span1[..., None] * u1, 0.0)
+    region = Region(robot.dh, wrist.T[:, :, None, None], -math.inf, math.inf,
+                    float(robot.lower[EXTEND]), float(robot.upper[EXTEND]), 0.0)
+    lo4, hi4 = region.r4_interval(r1)  # (n, 2, n_track)
+    valid = (lo1 <= hi1)[..., None] & (lo4 <= hi4)
+    u4 = (np.arange(n_extend) + 0.5) / n_extend
+    r4 = lo4[..., None] + np.where(valid, hi4 - lo4, 0.0)[..., None] * u4
+    r4 = np.where(valid[..., None], r4, 0.0)
+    shape = (n, 2 * n_track * n_extend)
+    r1g = np.broadcast_to(r1[..., None], r4.shape).reshape(shape)
+    r4g = r4.reshape(shape)
+    interval = np.broadcast_to(np.arange(2)[None, :, None, None], r4.shape).reshape(shape)
+    valid_g = np.broadcast_to(valid[..., None], r4.shape).reshape(shape)
+    y, ok = measures(robot, np.repeat(targets, shape[1], axis=0), r1g.ravel(), r4g.ravel(),
+                     robot.home)
+    y = y.reshape(*shape, N_BRANCHES, N_MEASURES)
+    ok = ok.reshape(*shape, N_BRANCHES) & valid_g[..., None]
+    return Candidates(r1g, r4g, np.ascontiguousarray(interval), y, ok, lo1, hi1)
+
+
+def measures(robot: Robot, targets: Array, r1: Array, r4: Array,
+             previous: Array) -> tuple[Array, NDArray[np.bool_]]:
+    """Closed-form solutions and their margin measures, one target per point.
+
+    Args:
+        robot: The robot.
+        targets: Flange poses (N, 4, 4) [m].
+        r1, r4: Track and extend (N,) [m].
+        previous: Joint vector(s) (8,) or (N, 8) the revolute axes stay nearest to.
+
+    Returns:
+        ``y`` (N, 8 branches, 10) and feasibility (N, 8).
+    """
+    packed, ok = six_axis_packed(robot.dh, targets, r1, r4, previous,
+                                 packed_limits(previous, robot.lower, robot.upper))
+    q = packed[:, IDX]  # (N, 8, 8)
+    sd = stretch_distance(robot.dh, targets[:, :3, 3], r1, r4)
+    y = np.concatenate([q, wrist_distance(q[..., TILT])[..., None],
+                        np.broadcast_to(sd[:, None, None], (*q.shape[:2], 1))], axis=-1)
+    return y, ok
+
+
+def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, Array]:
+    """The dynamic programme's tables.
+
+    Returns:
+        ``unary`` (n, C, S) and ``pair`` (n - 1, C, S, S): the margin cost of each state and
+        the first-order cost of each step, inf where infeasible. Chains C are the branch labels
+        that have a feasible state on every frame, with S = G candidate points each, or
+        (``merged``) one chain of S = 8 G states.
+    """
+    y = cand.y.transpose(0, 2, 1, 3)  # (n, 8, G, 10)
+    ok = cand.ok.transpose(0, 2, 1)
+    n, b, g = ok.shape
+    if merged:
+        y, ok = y.reshape(n, 1, b * g, N_MEASURES), ok.reshape(n, 1, b * g)
+    else:
+        alive = ok.any(axis=2).all(axis=0)
+        y, ok = y[:, alive], ok[:, alive]
+    unary = np.where(ok, cost.unary(y), np.inf)
+    c, s = ok.shape[1:]
+    q = np.moveaxis(y[..., :8], -1, 0)  # (8, n, C, S): one contiguous block per axis
+    pair = np.zeros((max(n - 1, 0), c, s, s))
+    per = max(1, _CHUNK // max(c * s * s, 1))
+    for a in range(0, n - 1, per):
+        e = min(a + per, n - 1)
+        for i in range(8):
+            d = q[i, a + 1:e + 1, :, None, :] - q[i, a:e, :, :, None]
+            pair[a:e] += cost.axis_step_cost(i, d)
+    return unary, pair
+
+
+def viterbi(unary: Array, pair: Array) -> tuple[Array, IntArray]:
+    """Shortest path over frames, one per chain.
+
+    Args:
+        unary: (n, C, S) state costs (inf: infeasible).
+        pair: (n - 1, C, S, S) step costs from state s at frame k to s' at frame k + 1.
+
+    Returns:
+        The best total cost per chain (C,) and its states (C, n).
+    """
+    n, c, s = unary.shape
+    acc = unary[0].copy()
+    back = np.empty((max(n - 1, 0), c, s), dtype=np.intp)
+    rows = np.arange(c)[:, None]
+    cols = np.arange(s)[None, :]
+    for k in range(n - 1):
+        tot = acc[:, :, None] + pair[k]
+        arg = np.argmin(tot, axis=1)
+        back[k] = arg
+        acc = tot[rows, arg, cols] + unary[k + 1]
+    path = np.empty((c, n), dtype=np.intp)
+    path[:, -1] = np.argmin(acc, axis=1)
+    best = acc[np.arange(c), path[:, -1]]
+    for k in range(n - 2, -1, -1):
+        path[:, k] = back[k][np.arange(c), path[:, k + 1]]
+    return best, path
+
+
+@dataclass(frozen=True)
+class DPChoice:
+    """The dynamic programme's answer.
+
+    Attributes:
+        cost: Its total first-order + margin cost.
+        point: Candidate point per frame (n,), an index into :class:`Candidates`' G axis.
+        branch: Closed-form branch per frame (n,).
+        y: Measures of the chosen configurations (n, 10), joints unwrapped into a continuous
+            path inside the limits where one fits.
+    """
+
+    cost: float
+    point: IntArray
+    branch: IntArray
+    y: Array
+
+
+def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
+    """Run the dynamic programme (per branch label, then merged if none reaches every frame).
+
+    Returns None when no sequence of candidates reaches every frame.
+    """
+    n, g = cand.r1.shape
+    for merged in (False, True):
+        unary, pair = chain_costs(cost, cand, merged)
+        best, path = viterbi(unary, pair)
+        if best.size == 0:
+            continue
+        c = int(np.argmin(best))
+        if math.isfinite(best[c]):
+            states = path[c]
+            label = c if merged else int(np.flatnonzero(cand.ok.any(axis=1).all(axis=0))[c])
+            branch = states // g if merged else np.full(n, label)
+            point = states % g if merged else states
+            y = cand.y[np.arange(n), point, branch].copy()
+            y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
+            return DPChoice(float(best[c]), point, branch, y)
+    return None
+
+
+def unwrap_into_limits(q: Array, lower: Array, upper: Array, start: Array) -> Array:
+    """Revolute columns made continuous, each shifted by whole turns into its limits (the
+    shift nearest ``start`` among those that fit best)."""
+    out = q.copy()
+    for i in np.flatnonzero(REVOLUTE):
+        col = np.unwrap(q[:, i])
+        best: tuple[float, float, int] | None = None
+        for m in range(-3, 4):
+            c = col + 2.0 * math.pi * m
+            over = float(np.maximum(c - upper[i], 0).sum() + np.maximum(lower[i] - c, 0).sum())
+            key = (over, abs(float(c[0]) - float(start[i])), m)
+            if best is None or key < best:
+                best = key
+        assert best is not None
+        out[:, i] = col + 2.0 * math.pi * best[2]
+    return out

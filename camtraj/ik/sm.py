@@ -1,0 +1,683 @@
+"""The SM method's per-frame search (the ``paper`` objective): the papers' optimum, frame by frame.
+
+The SM method (He 2018) fixes the two redundant prismatic axes, track (r1) and extend (r4), solves
+the remaining six axes in closed form (:mod:`camtraj.ik.closed_form`), and searches (r1, r4) for
+the solution that minimises the weighted axis motion ``F = sum(w_i * |q_i - q_i,prev|)``.
+
+Search. For one r1 the feasible extend values form an interval known in closed form
+(:mod:`camtraj.ik.region`); r1 itself is confined to at most two intervals around the target.
+Because moving a prismatic axis by d costs at least ``w_min * |d|``, the optimum lies within
+``F_best / w_min`` (L1) of the previous (r1, r4): the search box shrinks to that ball as soon as
+any feasible point is known. Inside the box a grid that contains the objective's kinks exactly
+(r1 = r1_prev, r4 = r4_prev, the box and reach boundaries) is zoomed around the best candidates.
+On smooth paths most frames are settled by a certificate instead: when holding track and extend
+still is feasible and the other axes' sensitivity to them is far below their weights, no other
+point can be cheaper. The same argument, in extend alone, settles most frames of the 1-D search
+without probing extend.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.errors import UnreachableError
+from camtraj.ik.closed_form import (
+    AX,
+    EXTEND,
+    IDX,
+    N_BRANCHES,
+    TRACK,
+    USES,
+    packed_limits,
+    six_axis_packed,
+    six_axis_solutions,
+)
+from camtraj.ik.region import Region
+from camtraj.robot import JOINT_NAMES, PRISMATIC, REVOLUTE, Robot
+
+Array = NDArray[np.float64]
+
+_FAST_RADIUS = 1e-3  # [m] certificate only when the competing region is this small
+_CERT_SAFETY = 0.5  # sensitivity must stay below this fraction of the prismatic weights
+_PROBE_OFFSETS = np.geomspace(1e-7, 0.05, 10)  # extend probe around the 1-D search's best [m]
+_EYE3 = np.eye(3)
+_ORTHO_TOL = 1e-6 + 1e-5 * _EYE3  # np.allclose(R.T @ R, I, atol=1e-6)
+
+
+@dataclass(frozen=True)
+class IKSolution:
+    """One solved pose.
+
+    Attributes:
+        q: Joint vector (8,) [m, rad].
+        cost: F = sum(w * |q - previous|) with the robot's weights (per m / per rad).
+        branch: Index 0..7 of the closed-form branch (rotate back, elbow, wrist flip bits).
+        within_step: False when a requested per-frame step bound could not be kept.
+    """
+
+    q: Array
+    cost: float
+    branch: int
+    within_step: bool = True
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """Limits in force for one solve: position limits, stretch margin, branch restriction."""
+
+    lower: Array
+    upper: Array
+    stretch_margin: float = 0.0
+    wrist_margin: float = 0.0
+    branch: int | None = None  # restrict the solve to one closed-form branch
+
+
+# ---------------------------------------------------------------------------------------------
+# The search
+# ---------------------------------------------------------------------------------------------
+
+
+class _Problem:
+    """One target, one previous solution, one set of bounds; remembers the best point seen."""
+
+    def __init__(self, robot: Robot, target: Array, previous: Array, bounds: _Bounds) -> None:
+        self.robot = robot
+        self.target = target
+        self.prev = previous
+        self.bounds = bounds
+        self.w = robot.weights
+        self.w_min = float(min(self.w[TRACK], self.w[EXTEND]))
+        self.region = Region(
+            robot.dh, target[:3, 3].copy(),
+            float(bounds.lower[TRACK]), float(bounds.upper[TRACK]),
+            float(bounds.lower[EXTEND]), float(bounds.upper[EXTEND]),
+            bounds.stretch_margin,
+        )
+        self.intervals, self.miss = self.region.r1_intervals()
+        self.best_q: Array | None = None
+        self.best_cost = math.inf
+        self.best_branch = -1
+        self._prev_packed = previous[AX]
+        self._limits = packed_limits(previous, bounds.lower, bounds.upper)
+        self._cost_matrix = USES * self.w[AX, None]  # (36, 8): F of each branch
+        self.evaluations = 0
+        self.calls = 0
+        self.near_line = False
+        self.probe_shift = math.inf  # how far the extend probe moved the best point [m]
+
+    def evaluate(self, r1: Array, r4: Array) -> tuple[Array, Array]:
+        """Cost (N, 8) with inf where infeasible, and the packed solutions (N, 36) (branch
+        ``br``'s joint vectors are ``packed[:, IDX[br]]``). Records the best."""
+        b = self.bounds
+        packed, ok = six_axis_packed(self.robot.dh, self.target, r1, r4, self.prev,
+                                      self._limits, b.stretch_margin, b.wrist_margin)
+        if b.branch is not None:
+            ok = ok & (np.arange(N_BRANCHES) == b.branch)
+        cost = np.where(ok, np.abs(packed - self._prev_packed) @ self._cost_matrix, np.inf)
+        self.evaluations += r1.shape[0]
+        self.calls += 1
+        flat = int(np.argmin(cost))
+        c = float(cost.flat[flat])
+        if c < self.best_cost:
+            i, br = divmod(flat, N_BRANCHES)
+            self.best_cost, self.best_q, self.best_branch = c, packed[i, IDX[br]], br
+        return cost, packed
+
+    def ball(self) -> float:
+        """Half-width [m] of the box that must hold the optimum (prismatic cost alone)."""
+        if self.w_min <= 0 or not math.isfinite(self.best_cost):
+            return math.inf
+        return self.best_cost / self.w_min
+
+    def clip_r4(self, r1: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """Extend nearest its previous value inside the reach interval, and where one exists."""
+        lo, hi = self.region.r4_interval(r1)
+        return np.minimum(np.maximum(self.prev[EXTEND], lo), hi), lo <= hi
+
+    def r1_grid(self, lo: float, hi: float, n: int) -> Array:
+        """Up to n track values over [lo, hi] intersected with the reachable intervals."""
+        parts = []
+        for a, b in self.intervals:
+            a2, b2 = max(a, lo), min(b, hi)
+            if a2 <= b2:
+                parts.append(np.linspace(a2, b2, max(3, n // len(self.intervals))))
+        return np.concatenate(parts) if parts else np.empty(0)
+
+    # -- the line search: hold extend where it can (r4 = clip(r4_prev)), search track -------
+    def line_search(self) -> bool:
+        """Settle the frame on the curve r4 = clip(r4_prev, reach interval(r1)).
+
+        For a fixed track value, moving extend costs ``w_extend`` per metre, so while the other
+        axes' sensitivity to extend stays below that weight the best extend is the one nearest
+        its previous value inside the reach interval. That leaves a 1-D problem in track whose
+        kinks (track held, extend reaching the end of its interval) are known in closed form.
+        Returns False when the reduction cannot be trusted (the caller then searches in 2-D).
+        """
+        if not self.intervals or self.w_min <= 0:
+            return False
+        r1p, r4p = float(self.prev[TRACK]), float(self.prev[EXTEND])
+        h = 1e-7
+        kinks = [r1p] if any(a <= r1p <= b for a, b in self.intervals) else []
+        kinks += self.region.r1_kinks(r4p)
+        kinks += [x for ab in self.intervals for x in ab]
+        kinks_a = np.array(kinks)
+        r4k, okk = self.clip_r4(kinks_a)
+        # a first guess of the ball: prismatic cost of the cheapest kink + some revolute motion
+        prism = self.w[TRACK] * np.abs(kinks_a - r1p) + self.w[EXTEND] * np.abs(r4k - r4p)
+        guess = (float(np.min(np.where(okk, prism, np.inf))) + 500.0) / self.w_min
+        if not math.isfinite(guess):
+            return False
+        grid = self.r1_grid(r1p - guess, r1p + guess, 24)
+        # stencils: along the curve (track +-h) and across it (extend +-h) at every kink
+        r1_pts = np.concatenate([kinks_a, kinks_a - h, kinks_a + h, kinks_a, kinks_a, grid])
+        r4_curve, ok_curve = self.clip_r4(r1_pts)
+        nk = len(kinks)
+        r4_pts = r4_curve.copy()
+        r4_pts[3 * nk: 4 * nk] -= h
+        r4_pts[4 * nk: 5 * nk] += h
+        if not ok_curve[:nk].any() and not ok_curve[5 * nk:].any():
+            return False
+        cost, packed = self.evaluate(r1_pts, r4_pts)
+        f = cost.min(axis=1)
+        f_kink, f_grid = f[:nk], f[5 * nk:]
+        samples_r1, samples_f = [kinks_a, grid], [f_kink, f_grid]
+
+        # the grid must cover the whole ball; widen it once if it did not
+        ball = self.ball()
+        if ball > guess:
+            grid2 = self.r1_grid(r1p - ball, r1p + ball, 48)
+            cost2, _ = self.evaluate(grid2, self.clip_r4(grid2)[0])
+            samples_r1.append(grid2)
+            samples_f.append(cost2.min(axis=1))
+        all_r1 = np.concatenate(samples_r1)
+        all_f = np.concatenate(samples_f)
+
+        # holes: reachable track values in the ball whose held-extend point is infeasible on
+        # every branch (another limit binds there): the 1-D reduction cannot see past them
+        ball = self.ball()
+        in_ball = (all_r1 >= r1p - ball) & (all_r1 <= r1p + ball)
+        if np.any(in_ball & self.clip_r4(all_r1)[1] & ~np.isfinite(all_f)):
+            return False
+
+        # done without zooming when the best sample is a kink that is a local minimum
+        k = int(np.argmin(f_kink)) if nk else -1
+        at_kink = (
+            k >= 0
+            and math.isfinite(f_kink[k])
+            and f_kink[k] <= all_f.min()
+            and f[nk + k] >= f_kink[k]
+            and f[2 * nk + k] >= f_kink[k]
+        )
+        if not at_kink:
+            self._zoom_line(all_r1, all_f)
+        elif self._extend_flat(cost[k::nk][[0, 3, 4]], packed[k::nk][[0, 3, 4]], h):
+            return True
+        if self._extend_sensitivity_ok():
+            return True
+        self.near_line = True  # the optimum is off the held-extend curve, but close to it
+        return False
+
+    def _zoom_line(self, r1s: Array, fs: Array, tol: float = 1e-9) -> None:
+        """Refine the best track value of the 1-D curve by shrinking brackets."""
+        order = np.argsort(r1s)
+        r1s, fs = r1s[order], fs[order]
+        i = int(np.argmin(fs))
+        lo = r1s[max(i - 1, 0)]
+        hi = r1s[min(i + 1, len(r1s) - 1)]
+        r1p = float(self.prev[TRACK])
+        while hi - lo > tol:
+            pts = np.linspace(lo, hi, 9)
+            if lo < r1p < hi:
+                pts = np.append(pts, r1p)
+            r4, ok = self.clip_r4(pts)
+            cost, _ = self.evaluate(pts[ok], r4[ok]) if ok.any() else (np.empty((0, 8)), None)
+            if cost.shape[0] == 0:
+                return
+            f = cost.min(axis=1)
+            pts = pts[ok]
+            j = int(np.argmin(f))
+            step = (hi - lo) / 8
+            lo, hi = max(pts[j] - step, lo), min(pts[j] + step, hi)
+
+    def _extend_flat(self, cost: Array, packed: Array, h: float) -> bool:
+        """The extend probe's question settled by a certificate at a kink of the 1-D search.
+
+        Row 0 of ``cost`` / ``packed`` is the best point (r1*, r4*), rows 1, 2 the same track
+        with extend -h, +h. At fixed track, a point r4 beats F* only if the extend it moves
+        away from the previous value, w_extend * |r4 - r4*| (r4* is the previous extend or
+        the end of its reach interval, beyond which nothing is feasible), is less than the
+        revolute part of F*: the competing interval has that radius. As for the vertex
+        certificate, when it is small and the revolute slopes there are far below w_extend
+        (or too shallow to dip below F* within it), no extend value is cheaper.
+        """
+        q = self.best_q
+        fstar = float(cost[0].min())
+        if q is None or not math.isfinite(fstar) or self.best_cost != fstar:
+            return False
+        w4 = float(self.w[EXTEND])
+        prism = (self.w[TRACK] * abs(q[TRACK] - self.prev[TRACK])
+                 + w4 * abs(q[EXTEND] - self.prev[EXTEND]))
+        radius = max(fstar - prism, 0.0) / w4
+        if w4 <= 0 or radius > _FAST_RADIUS:
+            return False
+        wr = self.w * REVOLUTE
+        for br in range(N_BRANCHES):
+            if not math.isfinite(cost[0, br]):
+                continue
+            fin = np.isfinite(cost[1:, br])
+            qb = packed[:, IDX[br]]
+            g = float(np.max(np.where(fin, np.abs(qb[1:] - qb[0]) @ wr / h, 0.0)))
+            if g <= _CERT_SAFETY * w4:
+                continue
+            if g < w4 or (cost[0, br] - fstar) < (g - w4) * radius:
+                return False
+        return True
+
+    def _extend_sensitivity_ok(self) -> bool:
+        """Check the reduction at the best point: no extend value nearby is cheaper.
+
+        Holding extend at clip(r4_prev) is optimal for a fixed track value as long as the
+        other axes do not gain more than ``w_extend`` per metre of extend. Probe extend on both
+        sides of the best point at geometrically spaced offsets up to a few centimetres.
+        """
+        if self.best_q is None:
+            return False
+        q0 = self.best_q
+        f0 = self.best_cost
+        offsets = _PROBE_OFFSETS
+        r4 = np.concatenate([q0[EXTEND] - offsets, q0[EXTEND] + offsets])
+        r1 = np.full(r4.shape, q0[TRACK])
+        self.evaluate(r1, r4)
+        self.probe_shift = abs(float(self.best_q[EXTEND]) - float(q0[EXTEND]))
+        return self.best_cost >= f0 - 1e-9 * max(1.0, f0)
+
+    # -- the vertex certificate (hold track and extend) ------------------------------------
+    def try_certificate(self) -> bool:
+        """Settle the frame at (r1_prev, r4_prev) if no other point can be cheaper."""
+        r1p, r4p = self.prev[TRACK], self.prev[EXTEND]
+        if self.w_min <= 0:
+            return False
+        lo, hi = self.region.r4_interval(np.array([r1p]))
+        if not lo[0] <= r4p <= hi[0]:
+            return False
+        h = 1e-6
+        r1 = np.array([r1p, r1p + h, r1p - h, r1p, r1p])
+        r4 = np.array([r4p, r4p, r4p, r4p + h, r4p - h])
+        cost, q = self.evaluate(r1, r4)
+        f0 = cost[0]
+        fstar = float(f0.min())
+        if not math.isfinite(fstar):
+            return False
+        radius = fstar / self.w_min
+        if radius > _FAST_RADIUS:
+            return False
+        wr = self.w * REVOLUTE
+        for br in range(N_BRANCHES):
+            if not math.isfinite(f0[br]):
+                continue
+            # one-sided slopes where a stencil point is infeasible (that side is blocked)
+            fin = np.isfinite(cost[:, br])
+            qb = q[:, IDX[br]]
+            slopes = np.abs(qb[1:] - qb[0]) @ wr / h
+            g = float(np.max(np.where(fin[1:], slopes, 0.0)))
+            if g <= _CERT_SAFETY * self.w_min:
+                continue
+            # a steeper branch is still safe if it cannot dip below fstar before the
+            # prismatic cost alone exceeds fstar
+            if g < self.w_min or (f0[br] - fstar) < (g - self.w_min) * radius:
+                return False
+        return bool(self.best_cost == fstar)
+
+    # -- the 2-D search ---------------------------------------------------------------------
+    def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.4,
+                   tol1: float = 1e-10, tol_t: float = 1e-9) -> None:
+        """Grid over the box that must hold the optimum, then zoom around the best cells.
+
+        Each of the ``keep`` best coarse cells zooms in its own window (all windows in one
+        vectorised evaluation per round); a window whose best point lands on its edge moves
+        there without shrinking, since the optimum may lie beyond it.
+        """
+        if not self.intervals:
+            return
+        r1p, r4p = float(self.prev[TRACK]), float(self.prev[EXTEND])
+        ball = self.ball()
+        if ball < 0.01:  # the box of a frame in a smooth move: a centimetre or less
+            n1, n4 = 24, 8
+        r1s = self.r1_grid(r1p - ball, r1p + ball, n1)
+        if r1s.size == 0:
+            return
+        if any(a <= r1p <= b for a, b in self.intervals):
+            r1s = np.append(r1s, r1p)
+        span = float(np.ptp(r1s)) if r1s.size > 1 else 1e-3
+        w1_0, wt_0 = span / max(n1 - 1, 2), 1.0 / max(n4 - 1, 2)
+        if self.near_line and self.best_q is not None:
+            # the 1-D search got within a hair of the optimum: zoom around its best point only
+            r1b, r4b = float(self.best_q[TRACK]), float(self.best_q[EXTEND])
+            lo, hi = self.region.r4_interval(np.array([r1b]))
+            lo_b, hi_b = max(lo[0], r4p - ball), min(hi[0], r4p + ball)
+            tb = (r4b - lo_b) / (hi_b - lo_b) if hi_b > lo_b else 0.0
+            # the extend probe found the cheaper point this far off the curve: start the zoom
+            # at that scale (a window whose best lands on its edge still follows and grows)
+            s = 5.0 * self.probe_shift
+            wt = min(wt_0, s / (hi_b - lo_b)) if hi_b > lo_b else wt_0
+            windows = [(r1b, min(max(tb, 0.0), 1.0), min(w1_0, s), wt)]
+        else:
+            coarse = self._grid_windows([r1s], [(0.0, 1.0)], n4, r4p, ball, ranked=keep)
+            windows = [(r1c, tc, w1_0, wt_0) for r1c, tc in coarse]
+        history: list[float] = []
+        quiet, rel = (3, 1e-6) if self.near_line else (4, 1e-8)
+        for rnd in range(60):
+            # stop when three rounds improved the best by less than a part in 1e8 (when
+            # zooming in on the 1-D search's best point, which is within ~1e-4 of the optimum
+            # already: two rounds, a part in 1e6)
+            history.append(self.best_cost)
+            if len(history) > quiet and history[-quiet] - history[-1] <= rel * history[-1]:
+                break
+            # the cost moves at most ~2 w_min per metre of prismatic motion: stop when the
+            # windows are too small to change it by a millionth
+            if math.isfinite(self.best_cost) and self.w_min > 0:
+                tol1 = max(tol1, 5e-7 * self.best_cost / (2 * self.w_min))
+                tol_t = max(tol_t, tol1 / max(2 * ball, 1e-12))
+            windows = [w for w in windows if w[2] > tol1 or w[3] > tol_t]
+            if not windows:
+                break
+            cols, tw = [], []
+            for r1c, tc, w1, wt in windows:
+                col = np.linspace(r1c - w1, r1c + w1, 5)
+                if r1c - w1 <= r1p <= r1c + w1:
+                    col = np.append(col, r1p)
+                cols.append(col)
+                tw.append((tc - wt, tc + wt))
+            found = self._grid_windows(cols, tw, 5, r4p, self.ball())
+            # windows that stay clearly worse than the best are other, worse basins
+            slack = 1e-3 if rnd < 4 else 1e-7
+            nxt = []
+            for (r1c, tc, w1, wt), best in zip(windows, found, strict=True):
+                if best is None or best[2] > self.best_cost * (1 + slack) + 1e-12:
+                    continue
+                r1n, tn, _ = best
+                # a best point on the window's edge: the optimum may lie beyond, so the
+                # window follows it and grows instead of shrinking
+                edge1 = abs(abs(r1n - r1c) - w1) < 1e-12 * max(1.0, abs(r1c))
+                edge_t = abs(abs(tn - tc) - wt) < 1e-12 and 0.0 < tn < 1.0
+                nxt.append((r1n, tn, min(2 * w1, w1_0) if edge1 else w1 * zoom,
+                            min(2 * wt, wt_0) if edge_t else wt * zoom))
+            windows = nxt
+
+    def _grid_windows(self, cols: list[Array], windows: list[tuple[float, float]], n4: int,
+                      r4p: float, ball: float, ranked: int = 0) -> list[Any]:
+        """Evaluate track columns x normalised extend rows for several windows at once.
+
+        Each column's extend range is its closed-form reach interval clipped to the ball; the
+        rows spread over that window of it, plus the held extend and the interval ends.
+        Returns the best (r1, t, cost) of each window (None where nothing is feasible), or
+        with ``ranked`` the best ``ranked`` distinct (r1, t) columns of the first window.
+        """
+        out: list[Any] = [None] * len(cols)
+        grp = np.repeat(np.arange(len(cols)), [c.size for c in cols])
+        r1s = np.concatenate(cols)
+        lo, hi = self.region.r4_interval(r1s)
+        lo = np.maximum(lo, r4p - ball)
+        hi = np.minimum(hi, r4p + ball)
+        sel = (r1s >= self.region.r1_lo) & (r1s <= self.region.r1_hi) & (lo <= hi)
+        if not sel.any():
+            return [] if ranked else out
+        r1s, lo, hi, grp = r1s[sel], lo[sel], hi[sel], grp[sel]
+        # rows of each window (normalised extend), then the interval ends and the held extend
+        ts = np.array([np.linspace(max(t0, 0.0), min(t1, 1.0), n4) for t0, t1 in windows])
+        ts = np.concatenate([ts, np.zeros((len(cols), 1)), np.ones((len(cols), 1))], axis=1)
+        span = hi - lo
+        r4 = lo[:, None] + span[:, None] * ts[grp]
+        held = np.minimum(np.maximum(r4p, lo), hi)
+        r4 = np.concatenate([r4, held[:, None]], axis=1)
+        safe_span = np.where(span > 0, span, 1.0)[:, None]
+        t = np.where(span[:, None] > 0, (r4 - lo[:, None]) / safe_span, 0.0).ravel()
+        r1 = np.repeat(r1s, r4.shape[1])
+        grp = np.repeat(grp, r4.shape[1])
+        r4 = r4.ravel()
+        cost, _ = self.evaluate(r1, r4)
+        best = cost.min(axis=1)
+        if ranked:
+            order = np.argsort(best)
+            picks: list[tuple[float, float]] = []
+            seen: set[float] = set()
+            for k in order[: 64 * ranked]:
+                if not math.isfinite(best[k]) or float(r1[k]) in seen:
+                    continue
+                seen.add(float(r1[k]))
+                picks.append((float(r1[k]), float(t[k])))
+                if len(picks) == ranked:
+                    break
+            return picks
+        for g in range(len(cols)):
+            idx = np.flatnonzero(grp == g)
+            if idx.size == 0:
+                continue
+            k = idx[int(np.argmin(best[idx]))]
+            if math.isfinite(best[k]):
+                out[g] = (float(r1[k]), float(t[k]), float(best[k]))
+        return out
+
+def _bounds_for(robot: Robot, previous: Array, max_step: Array | None) -> _Bounds:
+    """The papers' constraints: the hard position limits, with an optional step box."""
+    lower, upper = robot.lower.copy(), robot.upper.copy()
+    if max_step is not None:
+        # a step bound is a per-frame box around the previous solution; where the previous
+        # solution lies outside the limits the box is clamped, never inverted
+        lower = np.minimum(np.maximum(lower, previous - max_step), upper)
+        upper = np.maximum(np.minimum(upper, previous + max_step), lower)
+    return _Bounds(lower, upper)
+
+
+def _solve_one(robot: Robot, target: Array, previous: Array, bounds: _Bounds) -> _Problem:
+    prob = _Problem(robot, target, previous, bounds)
+    if prob.try_certificate() or prob.line_search():
+        return prob
+    prob.box_search()
+    return prob
+
+
+def check_joints(value: ArrayLike, name: str, bound: float = 1e4) -> Array:
+    """A joint vector argument as (8,) floats; ValueError naming ``name`` otherwise."""
+    try:
+        q = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        msg = f"{name} must be 8 joint values [m, rad], got {value!r}"
+        raise ValueError(msg) from None
+    if q.shape != (8,) or not np.all(np.isfinite(q)) or np.abs(q).max() > bound:
+        msg = (f"{name} must be 8 finite joint values [m, rad] within +-{bound:g}, "
+               f"got {np.array2string(q, precision=4)}")
+        raise ValueError(msg)
+    return q
+
+
+def solve_ik(
+    robot: Robot,
+    target: ArrayLike,
+    previous: ArrayLike | None = None,
+    *,
+    max_step: ArrayLike | None = None,
+    branch: int | None = None,
+) -> IKSolution:
+    """Solve one flange pose, minimising the papers' weighted motion F from ``previous``.
+
+    Args:
+        robot: The robot (limits, weights).
+        target: Flange pose in the base frame (``flange2base``), shape (4, 4) [m].
+        previous: Joint vector (8,) the move starts from; default the robot's home.
+        max_step: Optional per-axis bound on |q - previous| (8,) [m, rad], e.g. what each axis
+            can travel in one frame at its velocity limit. It keeps consecutive frames on one
+            branch; where no solution respects it, it is widened (x2, x4, x8, x16) and only
+            then dropped (``within_step`` is False in either case).
+        branch: Restrict the solution to this closed-form branch (0..7), e.g. to start a shot
+            elbow-up instead of elbow-down.
+
+    Returns:
+        The solution.
+
+    Raises:
+        ValueError: A malformed argument (named in the message).
+        UnreachableError: No solution inside the joint limits; says by how much it misses.
+    """
+    T = check_target(target)
+    prev = robot.home.copy() if previous is None else check_joints(previous, "previous")
+    step = None
+    if max_step is not None:
+        step = np.asarray(max_step, dtype=float)
+        if step.shape != (8,) or not np.all(step >= 0) or np.isnan(step).any():
+            msg = f"max_step must be 8 non-negative values [m, rad], got {max_step!r}"
+            raise ValueError(msg)
+    if branch is not None and (isinstance(branch, bool) or branch not in range(N_BRANCHES)):
+        msg = f"branch must be an integer 0..{N_BRANCHES - 1}, got {branch!r}"
+        raise ValueError(msg)
+    # a step bound that cannot be kept is widened before it is dropped, so a move too fast
+    # for the robot stays continuous (the timing stage then reports its speed honestly)
+    scales: list[float | None] = [1.0, 2.0, 4.0, 8.0, 16.0, None] if step is not None else [None]
+    for scale in scales:
+        bounds = _bounds_for(robot, prev, None if scale is None or step is None else step * scale)
+        if branch is not None:
+            bounds = dataclasses.replace(bounds, branch=branch)
+        prob = _solve_one(robot, T, prev, bounds)
+        if prob.best_q is not None:
+            return IKSolution(prob.best_q, prob.best_cost, prob.best_branch,
+                              within_step=scale == 1.0 or step is None)
+    raise _diagnose(robot, T, prev)
+
+
+def motion_cost(robot: Robot, q: ArrayLike, previous: ArrayLike) -> Array:
+    """F = sum(w * |q - previous|) for joint vectors q (..., 8)."""
+    return np.asarray(np.abs(np.asarray(q) - np.asarray(previous)) @ robot.weights)
+
+
+def check_target(target: ArrayLike) -> Array:
+    T = np.asarray(target, dtype=float)
+    if T.shape != (4, 4):
+        msg = f"target must be a 4x4 pose, got shape {T.shape}"
+        raise ValueError(msg)
+    if not np.isfinite(T).all():
+        msg = "target must be a finite pose (it contains NaN or infinity)"
+        raise ValueError(msg)
+    R = T[:3, :3]
+    # orthonormal (as np.allclose(R.T @ R, I, atol=1e-6)) and not mirrored (det > 0)
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if not (np.abs(R.T @ R - _EYE3) <= _ORTHO_TOL).all() or det < 0:
+        msg = "target rotation is not a proper rotation matrix (scaled, sheared or mirrored)"
+        raise ValueError(msg)
+    return T
+
+
+def _diagnose(robot: Robot, T: Array, prev: Array) -> UnreachableError:
+    """Say why a pose has no solution and by how much it misses."""
+    bounds = _bounds_for(robot, prev, None)
+    prob = _Problem(robot, T, prev, bounds)
+    intervals, miss = prob.intervals, prob.miss
+    W = T[:3, 3]
+    where = f"camera at ({W[0]:.3f}, {W[1]:.3f}, {W[2]:.3f}) m"
+    if not intervals:
+        return UnreachableError(
+            f"{where} is out of reach by {miss:.3f} m (arm fully extended, track "
+            f"[{robot.lower[TRACK]:.2f}, {robot.upper[TRACK]:.2f}] m)",
+            miss=miss,
+        )
+    # position reachable: find the candidate whose worst limit overrun is smallest
+    free = _Bounds(np.full(8, -np.inf), np.full(8, np.inf), 0.0)
+    best: tuple[float, int] | None = None
+    for a, b in intervals:
+        r1s = np.linspace(a, b, 61)
+        lo, hi = prob.region.r4_interval(r1s)
+        sel = lo <= hi
+        if not np.any(sel):
+            continue
+        t = np.linspace(0, 1, 21)
+        r4 = (lo[sel, None] + (hi[sel] - lo[sel])[:, None] * t).ravel()
+        r1 = np.repeat(r1s[sel], t.size)
+        q_free, ok_free = six_axis_solutions(robot.dh, T, r1, r4, prev, free.lower, free.upper)
+        over = np.maximum(q_free - robot.upper, 0) + np.maximum(robot.lower - q_free, 0)
+        over = np.where(ok_free[..., None], over, np.inf)
+        worst = over.max(axis=-1)
+        k = int(np.argmin(worst))
+        i, br = divmod(k, N_BRANCHES)
+        cand = (float(worst.flat[k]), int(np.argmax(over[i, br])))
+        if best is None or cand[0] < best[0]:
+            best = cand
+    if best is None or not math.isfinite(best[0]):
+        return UnreachableError(f"{where}: no arm configuration reaches it", miss=math.inf)
+    amount, axis = best
+    name = JOINT_NAMES[axis]
+    if PRISMATIC[axis]:
+        return UnreachableError(
+            f"{where} needs {name} {amount:.3f} m beyond its limit", miss=amount, axis=name
+        )
+    return UnreachableError(
+        f"{where} needs {name} {math.degrees(amount):.1f} deg beyond its limit",
+        miss=amount, miss_unit="rad", axis=name,
+    )
+
+
+def traverse(
+    robot: Robot,
+    target: ArrayLike,
+    previous: ArrayLike,
+    *,
+    radius: float | None = None,
+    n1: int = 401,
+    n4: int = 101,
+    refine: int = 2,
+) -> IKSolution:
+    """Dense traversal of (track, extend): the brute-force check the SM paper used.
+
+    Every point of an n1 x n4 grid over the track and extend limits (or over the box of
+    half-width ``radius`` around the previous values, which must contain the optimum when
+    ``radius >= F_known / min(w_track, w_extend)``) is solved in closed form on all branches;
+    each extend column also holds the previous extend value and the ends of its reach interval.
+    The best ``refine`` times: a grid ten times finer over the 2 x 2 cells around the best point.
+    Slow by design (no search logic to trust); for tests and benchmarks.
+
+    Raises:
+        UnreachableError: Nothing on the grid is feasible.
+    """
+    T = check_target(target)
+    prev = check_joints(previous, "previous")
+    bounds = _bounds_for(robot, prev, None)
+    prob = _Problem(robot, T, prev, bounds)
+    r1p, r4p = float(prev[TRACK]), float(prev[EXTEND])
+    lo1, hi1 = float(bounds.lower[TRACK]), float(bounds.upper[TRACK])
+    lo4, hi4 = float(bounds.lower[EXTEND]), float(bounds.upper[EXTEND])
+    if radius is not None:
+        lo1, hi1 = max(lo1, r1p - radius), min(hi1, r1p + radius)
+        lo4, hi4 = max(lo4, r4p - radius), min(hi4, r4p + radius)
+
+    def sweep(a1: float, b1: float, a4: float, b4: float, m1: int, m4: int) -> None:
+        r1s = np.linspace(a1, b1, m1)
+        if a1 <= r1p <= b1:
+            r1s = np.append(r1s, r1p)
+        ilo, ihi = prob.region.r4_interval(r1s)
+        rows = np.linspace(a4, b4, m4)
+        for k in range(0, r1s.size, 64):
+            c = r1s[k:k + 64]
+            extra = np.stack([np.full(c.size, r4p), ilo[k:k + 64], ihi[k:k + 64]], axis=1)
+            r4 = np.concatenate([np.broadcast_to(rows, (c.size, rows.size)), extra], axis=1)
+            keep = (r4 >= a4) & (r4 <= b4)
+            r1 = np.broadcast_to(c[:, None], r4.shape)[keep]
+            if r1.size:
+                prob.evaluate(r1, r4[keep])
+
+    sweep(lo1, hi1, lo4, hi4, n1, n4)
+    d1, d4 = (hi1 - lo1) / max(n1 - 1, 1), (hi4 - lo4) / max(n4 - 1, 1)
+    for _ in range(refine):
+        if prob.best_q is None:
+            break
+        c1, c4 = prob.best_q[TRACK], prob.best_q[EXTEND]
+        sweep(max(c1 - 2 * d1, lo1), min(c1 + 2 * d1, hi1),
+              max(c4 - 2 * d4, lo4), min(c4 + 2 * d4, hi4), 41, 41)
+        d1, d4 = d1 / 10, d4 / 10
+    if prob.best_q is None:
+        raise UnreachableError("no grid point of the traversal reaches the target", miss=math.inf)
+    return IKSolution(prob.best_q, prob.best_cost, prob.best_branch)
