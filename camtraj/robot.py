@@ -101,7 +101,7 @@ class IKSettings:
     limit_margin_prismatic [m], limit_margin_revolute [rad]: the same near position limits.
     motion_weight, velocity_weight, overspeed_weight, acceleration_weight, jerk_weight,
         margin_weight: the weights of the objective's terms.
-    track_samples, extend_samples: the candidate grid per reachable track interval.
+    track_samples, extend_samples, hold_samples: the candidate grid (``camtraj.ik.shot``).
     refine_rounds: most Gauss-Newton steps of the continuous refinement.
     """
 
@@ -112,13 +112,14 @@ class IKSettings:
     limit_margin_revolute: float = math.radians(25.0)
     motion_weight: float = 1.0
     velocity_weight: float = 1.0
-    overspeed_weight: float = 100.0
+    overspeed_weight: float = 1000.0
     acceleration_weight: float = 1.0
     jerk_weight: float = 1.0
     margin_weight: float = 10.0
-    track_samples: int = 3
+    track_samples: int = 2
     extend_samples: int = 2
-    refine_rounds: int = 4
+    hold_samples: int = 4
+    refine_rounds: int = 6
 
 
 @dataclass(frozen=True)
@@ -408,6 +409,7 @@ _IK_RANGES: dict[str, tuple[float, float, str]] = {
     "margin_weight": (0.0, 1e4, ""),
     "track_samples": (1, 16, "int"),
     "extend_samples": (1, 16, "int"),
+    "hold_samples": (0, 32, "int"),
     "refine_rounds": (0, 100, "int"),
 }
 

@@ -148,3 +148,49 @@ def test_wrist_singularity_keeps_the_previous_pan(robot: Robot) -> None:
             assert qs[0, branch, 5] == pytest.approx(0.7, abs=1e-9)
             dp, dr = pose_error(robot.fk(qs[0, branch]), T)
             assert dp < 1e-9 and dr < 1e-9
+
+
+def test_optimal_where_the_previous_elbow_sits_on_its_limit(robot: Robot) -> None:
+    """The per-frame optimum stays global where the previous elbow is exactly on -180 deg: the
+    optimum then often slides along that limit (track and extend together)."""
+    rng = np.random.default_rng(5)
+    checked = 0
+    for _ in range(60):
+        prev = rng.uniform(robot.lower * 0.6, robot.upper * 0.6)
+        prev[4] = -math.pi
+        q = prev + rng.normal(0, 1, 8) * np.array([0.01, 0.01, 0.01, 0.005, 0.01, 0.02, 0.02,
+                                                   0.02])
+        q[4] = -math.pi + abs(q[4] + math.pi)
+        T = robot.fk(q)
+        try:
+            sol = solve_ik(robot, T, prev)
+        except UnreachableError:
+            continue
+        brute = traverse(robot, T, prev, radius=sol.cost / W_MIN * 1.001 + 1e-6, n1=41, n4=21,
+                         refine=3)
+        assert sol.cost <= brute.cost * (1 + 1e-3) + 1e-9
+        checked += 1
+    assert checked >= 40
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "word"),
+    [
+        ({"previous": np.full(8, 1e300)}, "previous"),
+        ({"previous": [0.0, 1.0]}, "previous"),
+        ({"branch": 9}, "branch"),
+        ({"branch": True}, "branch"),
+        ({"max_step": [-1.0] * 8}, "max_step"),
+    ],
+)
+def test_malformed_arguments_raise_value_error_naming_them(
+        robot: Robot, kwargs: dict[str, object], word: str) -> None:
+    with pytest.raises(ValueError, match=word):
+        solve_ik(robot, GA_TARGET, **kwargs)  # type: ignore[arg-type]
+
+
+def test_non_finite_target_is_a_value_error(robot: Robot) -> None:
+    T = GA_TARGET.copy()
+    T[0, 3] = math.inf
+    with pytest.raises(ValueError, match="target"):
+        solve_ik(robot, T)

@@ -61,7 +61,7 @@ class _Corridor:
 
 
 def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
-           y0: Array, lo1: Array, hi1: Array, rounds: int = 4) -> Refined:
+           y0: Array, lo1: Array, hi1: Array, rounds: int = 6) -> Refined:
     """Lower the shot objective from the start curves x0 (n, 2), measures y0 (n, 10).
 
     Args:
@@ -72,7 +72,8 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         x0: Start track/extend per frame (n, 2) [m], feasible.
         y0: Its measures (n, 10), joints continuous.
         lo1, hi1: The track interval each frame stays in (n,) [m].
-        rounds: Most Gauss-Newton steps.
+        rounds: Most Gauss-Newton steps (up to four times as many while a step between frames
+            still exceeds a velocity limit).
     """
     n = x0.shape[0]
     corridor = _Corridor(robot, targets, lo1, hi1)
@@ -86,7 +87,7 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
     rows = np.arange(n)
     b3 = np.tile(branch, 3)
     rel = 0.0
-    for _ in range(rounds):
+    for rnd in range(4 * rounds):
         # measures at x + h e_track and x + h e_extend (x itself is known), one closed-form
         # call; a side the closed form cannot solve (a corridor edge) is taken backwards
         grad_y = np.zeros((n, N_MEASURES, 2))
@@ -124,7 +125,11 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
                 break
             mu *= 10.0
         taken += 1
-        if not improved or rel < 1e-6:
+        if not improved:
+            break
+        # beyond ``rounds`` only while a step still exceeds a velocity limit (up to 4x as many)
+        fast = bool(np.any(np.abs(np.diff(y[:, :8], axis=0)) > cost.vel))
+        if rel < 1e-4 or (rnd + 1 >= rounds and not fast):
             break
     return Refined(x, y, j, taken)
 
@@ -146,7 +151,7 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
             sign = np.sign(z)
             dz = 2 * cost.velocity * z + 2 * cost.overspeed * over * sign + cost.motion_coef * sign
             ddz = (2 * cost.velocity + 2 * cost.overspeed * (over > 0)
-                   + cost.motion_coef / np.maximum(a, 1e-3))
+                   + cost.motion_coef / np.maximum(a, 0.05))
             scale = cost.vel
         elif order == 2:
             z = np.diff(q, 2, axis=0) / cost.acc
@@ -177,6 +182,24 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
         hz = np.where(active, 2 * cost.margin * dz * dz, 0.0)
         g += np.einsum("ki,kip->kp", gz, grad_y)
         H[0] += np.einsum("ki,kip,kiq->kpq", hz, grad_y, grad_y)
+    if n > 1:  # run-up / run-out room: frames (0, 1) and (n - 1, n - 2)
+        for edge, inner in ((0, 1), (n - 1, n - 2)):
+            p, slope = cost.edge_excursion(q[edge], q[inner])
+            e = cost.edge_intrusion(p)
+            if not (e > 0).any():
+                continue
+            lower_near = (p - cost.lower) <= (cost.upper - p)
+            de = np.where(e > 0, -np.where(lower_near, 1.0, -1.0) / cost.zone[:8], 0.0)
+            ge, he = 2 * cost.margin * e * de, 2 * cost.margin * de * de
+            a_e = slope[:, None] * G[edge]  # dp/dx_edge (8, 2)
+            a_i = (1.0 - slope)[:, None] * G[inner]
+            g[edge] += ge @ a_e
+            g[inner] += ge @ a_i
+            H[0][edge] += (he[:, None, None] * a_e[:, :, None] * a_e[:, None, :]).sum(axis=0)
+            H[0][inner] += (he[:, None, None] * a_i[:, :, None] * a_i[:, None, :]).sum(axis=0)
+            lo_f = min(edge, inner)
+            a_lo, a_hi = (a_e, a_i) if edge < inner else (a_i, a_e)
+            H[1][lo_f] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
     return H, g
 
 

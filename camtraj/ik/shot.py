@@ -69,40 +69,76 @@ class Candidates:
     track_hi: Array
 
 
-def candidates(robot: Robot, targets: Array, n_track: int = 4, n_extend: int = 3) -> Candidates:
-    """A grid of ``2 * n_track * n_extend`` points per frame over the feasible region, solved.
+def candidates(robot: Robot, targets: Array, n_track: int = 3, n_extend: int = 2,
+               n_hold: int = 4) -> Candidates:
+    """Candidate points per frame over the feasible region, solved on every branch.
 
     Args:
         robot: The robot.
         targets: Flange poses (n, 4, 4) [m].
-        n_track: Track values per reachable interval (at the middles of equal parts).
-        n_extend: Extend values per track value (likewise, over its reach interval).
+        n_track: Track values per reachable interval, at the middles of equal parts (they move
+            with the region from frame to frame).
+        n_extend: Extend values per track value, likewise over its reach interval.
+        n_hold: Track values shared by every frame, spread over the whole shot's reachable
+            track range (a track held still through the shot is a candidate path); where one
+            lies outside a frame's intervals it is not a candidate there.
+
+    The G = (2 n_track + n_hold) n_extend points of a frame are in a fixed order, so point g of
+    one frame and of the next are "the same place" in the region.
     """
     n = targets.shape[0]
     wrist = targets[:, :3, 3]
     lo1, hi1 = track_intervals(robot.dh, wrist, float(robot.lower[TRACK]),
                                float(robot.upper[TRACK]), float(robot.lower[EXTEND]),
                                float(robot.upper[EXTEND]))
-    span1 = np.where(lo1 <= hi1, hi1 - lo1, 0.0)
+    reach = lo1 <= hi1
+    span1 = np.where(reach, hi1 - lo1, 0.0)
     u1 = (np.arange(n_track) + 0.5) / n_track
-    r1 = np.where((lo1 <= hi1)[..., None], lo1[..., None] + span1[..., None] * u1, 0.0)
-    region = Region(robot.dh, wrist.T[:, :, None, None], -math.inf, math.inf,
+    r1 = np.where(reach[..., None], lo1[..., None] + span1[..., None] * u1, 0.0)  # (n, 2, k)
+    iv = np.broadcast_to(np.arange(2)[None, :, None], r1.shape)
+    ok1 = np.broadcast_to(reach[..., None], r1.shape)
+    if n_hold > 0 and reach.any():
+        held = _held_track(lo1, hi1, n_hold)
+        inside = (lo1[:, :, None] <= held) & (held <= hi1[:, :, None])  # (n, 2, h)
+        r1 = np.concatenate([r1.reshape(n, -1), np.broadcast_to(held, (n, n_hold))], axis=1)
+        iv = np.concatenate([iv.reshape(n, -1), np.argmax(inside, axis=1)], axis=1)
+        ok1 = np.concatenate([ok1.reshape(n, -1), inside.any(axis=1)], axis=1)
+    r1, iv, ok1 = r1.reshape(n, -1), iv.reshape(n, -1), ok1.reshape(n, -1)
+    region = Region(robot.dh, wrist.T[:, :, None], -math.inf, math.inf,
                     float(robot.lower[EXTEND]), float(robot.upper[EXTEND]), 0.0)
-    lo4, hi4 = region.r4_interval(r1)  # (n, 2, n_track)
-    valid = (lo1 <= hi1)[..., None] & (lo4 <= hi4)
+    lo4, hi4 = region.r4_interval(r1)  # (n, m)
+    valid = ok1 & (lo4 <= hi4)
     u4 = (np.arange(n_extend) + 0.5) / n_extend
     r4 = lo4[..., None] + np.where(valid, hi4 - lo4, 0.0)[..., None] * u4
     r4 = np.where(valid[..., None], r4, 0.0)
-    shape = (n, 2 * n_track * n_extend)
+    shape = (n, r1.shape[1] * n_extend)
     r1g = np.broadcast_to(r1[..., None], r4.shape).reshape(shape)
     r4g = r4.reshape(shape)
-    interval = np.broadcast_to(np.arange(2)[None, :, None, None], r4.shape).reshape(shape)
+    interval = np.broadcast_to(iv[..., None], r4.shape).reshape(shape)
     valid_g = np.broadcast_to(valid[..., None], r4.shape).reshape(shape)
     y, ok = measures(robot, np.repeat(targets, shape[1], axis=0), r1g.ravel(), r4g.ravel(),
                      robot.home)
     y = y.reshape(*shape, N_BRANCHES, N_MEASURES)
     ok = ok.reshape(*shape, N_BRANCHES) & valid_g[..., None]
-    return Candidates(r1g, r4g, np.ascontiguousarray(interval), y, ok, lo1, hi1)
+    return Candidates(np.ascontiguousarray(r1g), r4g, np.ascontiguousarray(interval), y, ok,
+                      lo1, hi1)
+
+
+def _held_track(lo1: Array, hi1: Array, n_hold: int) -> Array:
+    """Track values to hold through the shot: first inside the part of a track interval that
+    every frame shares (two per interval where there is one), then spread over the union."""
+    out: list[float] = []
+    for j in range(2):
+        ok = lo1[:, j] <= hi1[:, j]
+        if ok.all() and len(out) + 2 <= n_hold:
+            a, b = float(lo1[:, j].max()), float(hi1[:, j].min())
+            if a <= b:
+                out += [a + 0.25 * (b - a), a + 0.75 * (b - a)]
+    reach = lo1 <= hi1
+    a, b = float(lo1[reach].min()), float(hi1[reach].max())
+    rest = n_hold - len(out)
+    out += list(a + (b - a) * (np.arange(rest) + 0.5) / max(rest, 1))
+    return np.array(out[:n_hold])
 
 
 def measures(robot: Robot, targets: Array, r1: Array, r4: Array,
@@ -154,6 +190,10 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, 
         for i in range(8):
             d = q[i, a + 1:e + 1, :, None, :] - q[i, a:e, :, :, None]
             pair[a:e] += cost.axis_step_cost(i, d)
+    if n > 1:  # run-up and run-out room at the shot's ends
+        qs = np.moveaxis(q, 0, -1)  # (n, C, S, 8)
+        pair[0] += cost.edge_cost(qs[0, :, :, None, :], qs[1, :, None, :, :])
+        pair[-1] += cost.edge_cost(qs[-1, :, None, :, :], qs[-2, :, :, None, :])
     return unary, pair
 
 

@@ -17,7 +17,9 @@ For a joint path q (n, 8) at frame interval dt, with per-axis usages of the robo
 frame at its velocity limit", so ``motion * sum(m |z1|)`` is F rescaled. The first-order terms
 (motion, velocity, overspeed) and the margins are what the dynamic programme sees; acceleration
 and jerk join in the continuous refinement. The first frame carries no motion term: the run-up
-brings the robot there, whatever the start.
+brings the robot there, whatever the start. A shot that starts or ends in motion needs room for
+its run-up and run-out: the first and last frames' positions pushed out by each axis's stopping
+distance at its edge velocity carry the same margin cost (``edge_cost``).
 """
 
 from __future__ import annotations
@@ -60,6 +62,9 @@ class ShotCost:
     jerk_weight: float
     margin: float
     zone: Array
+    dt: float
+    a_max: Array
+    j_max: Array
 
     @classmethod
     def for_robot(cls, robot: Robot, dt: float) -> ShotCost:
@@ -75,6 +80,7 @@ class ShotCost:
             acceleration=s.acceleration_weight, jerk_weight=s.jerk_weight,
             margin=s.margin_weight,
             zone=np.concatenate([zone_axes, [s.wrist_margin, s.stretch_margin]]),
+            dt=dt, a_max=robot.max_acceleration, j_max=robot.max_jerk,
         )
 
     # -- parts -----------------------------------------------------------------------------
@@ -116,12 +122,43 @@ class ShotCost:
         e = self.intrusion(y)
         return np.asarray(self.margin * (e * e).sum(axis=-1))
 
+    def stop_distance(self, v: Array) -> tuple[Array, Array]:
+        """Shortest stopping distance (..., 8) [m, rad] of each axis from speed ``v`` >= 0
+        (no initial acceleration) within its acceleration and jerk limits, and its derivative
+        in ``v``."""
+        a, j = self.a_max, self.j_max
+        big = v >= a * a / j
+        root = np.sqrt(np.maximum(v, 0.0) / j)
+        d = np.where(big, 0.5 * v * (v / a + a / j), v * root)
+        dd = np.where(big, v / a + 0.5 * a / j, 1.5 * root)
+        return np.asarray(d), np.asarray(dd)
+
+    def edge_excursion(self, q_edge: Array, q_inner: Array) -> tuple[Array, Array]:
+        """Where the run-up starts (or the run-out stops) at least: the edge frame's position
+        pushed out by the stopping distance of its velocity, (..., 8), and d p / d q_edge
+        (d p / d q_inner is 1 minus it)."""
+        d = q_edge - q_inner
+        d = np.where(REVOLUTE, (d + math.pi) % (2.0 * math.pi) - math.pi, d)
+        dist, slope = self.stop_distance(np.abs(d) / self.dt)
+        return np.asarray(q_edge + np.sign(d) * dist), np.asarray(1.0 + slope / self.dt)
+
+    def edge_intrusion(self, p: Array) -> Array:
+        """Margin intrusions (..., 8) of run-up / run-out excursions ``p`` (..., 8)."""
+        d = np.minimum(p - self.lower, self.upper - p)
+        return np.asarray(np.maximum(1.0 - d / self.zone[:8], 0.0))
+
+    def edge_cost(self, q_edge: Array, q_inner: Array) -> Array:
+        """Margin cost (...) of the run-up or run-out room at a shot's end frame."""
+        e = self.edge_intrusion(self.edge_excursion(q_edge, q_inner)[0])
+        return np.asarray(self.margin * (e * e).sum(axis=-1))
+
     def total(self, y: Array) -> float:
         """J of a continuous path with measures y (n, 10) (joints unwrapped)."""
         q = y[:, :8]
         j = float(self.unary(y).sum())
         if q.shape[0] > 1:
             j += float(self.first_order(np.diff(q, axis=0) / self.vel).sum())
+            j += float(self.edge_cost(q[0], q[1]) + self.edge_cost(q[-1], q[-2]))
         if q.shape[0] > 2:
             z2 = np.diff(q, 2, axis=0) / self.acc
             j += self.acceleration * float((z2 * z2).sum())

@@ -216,12 +216,26 @@ class _Problem:
         )
         if not at_kink:
             self._zoom_line(all_r1, all_f)
-        elif self._extend_flat(cost[k::nk][[0, 3, 4]], packed[k::nk][[0, 3, 4]], h):
+        if self._on_revolute_limit():
+            # a revolute limit (e.g. the elbow on -180 deg) binds at the best point: the
+            # optimum may slide along that limit's boundary, moving track and extend together,
+            # which the 1-D reduction cannot see
+            return False
+        if at_kink and self._extend_flat(cost[k::nk][[0, 3, 4]], packed[k::nk][[0, 3, 4]], h):
             return True
         if self._extend_sensitivity_ok():
             return True
         self.near_line = True  # the optimum is off the held-extend curve, but close to it
         return False
+
+    def _on_revolute_limit(self, tol: float = 1e-7) -> bool:
+        """Whether the best point has a revolute axis within ``tol`` of a position limit."""
+        q = self.best_q
+        if q is None:
+            return False
+        b = self.bounds
+        near = (q - b.lower <= tol) | (b.upper - q <= tol)
+        return bool(np.any(near & REVOLUTE))
 
     def _zoom_line(self, r1s: Array, fs: Array, tol: float = 1e-9) -> None:
         """Refine the best track value of the 1-D curve by shrinking brackets."""
@@ -303,6 +317,9 @@ class _Problem:
         r1p, r4p = self.prev[TRACK], self.prev[EXTEND]
         if self.w_min <= 0:
             return False
+        b = self.bounds
+        if np.any(((self.prev - b.lower <= 1e-7) | (b.upper - self.prev <= 1e-7)) & REVOLUTE):
+            return False  # a limit binds: the optimum may slide along its boundary
         lo, hi = self.region.r4_interval(np.array([r1p]))
         if not lo[0] <= r4p <= hi[0]:
             return False
@@ -333,6 +350,77 @@ class _Problem:
             if g < self.w_min or (f0[br] - fstar) < (g - self.w_min) * radius:
                 return False
         return bool(self.best_cost == fstar)
+
+    # -- a binding revolute limit ----------------------------------------------------------
+    def binding_axes(self, tol: float = 1e-7) -> list[tuple[int, float]]:
+        """Revolute axes (and the limit value) on which the previous or the best solution sits."""
+        b = self.bounds
+        out: list[tuple[int, float]] = []
+        for q in (self.prev, self.best_q):
+            if q is None:
+                continue
+            for i in np.flatnonzero(REVOLUTE):
+                for lim in (float(b.lower[i]), float(b.upper[i])):
+                    if abs(q[i] - lim) <= tol and (int(i), lim) not in out:
+                        out.append((int(i), lim))
+        return out
+
+    def boundary_search(self, axis: int, limit: float, n1: int = 33, rounds: int = 6) -> None:
+        """Search along the curve where ``axis`` sits exactly on ``limit``.
+
+        Where a revolute limit binds, the optimum may lie on that limit's boundary in the
+        (track, extend) plane, a curve no grid meets exactly. For track values across the
+        ball, extend is solved onto the curve by Newton steps (the closed form's axis value
+        is smooth in extend) on the branches whose axis is near that limit, all in one
+        closed-form call per step, and the best point zooms in track.
+        """
+        if not self.intervals or self.w_min <= 0:
+            return
+        r1p, r4p = float(self.prev[TRACK]), float(self.prev[EXTEND])
+        free = packed_limits(self.prev, np.full(8, -np.inf), np.full(8, np.inf))
+        packed0, _ = six_axis_packed(self.robot.dh, self.target, np.array([r1p]),
+                                     np.array([r4p]), self.prev, free)
+        cols = IDX[:, axis]
+        near = np.abs(packed0[0, cols] - limit) < 0.2
+        if self.best_branch >= 0:
+            near[self.best_branch] = True
+        cols = np.unique(cols[near])
+        if cols.size == 0:
+            return
+        ball = self.ball()
+        if not math.isfinite(ball):
+            ball = 0.5
+        lo, hi = r1p - ball, r1p + ball
+        h = 1e-7
+        for _ in range(rounds):
+            r1s = self.r1_grid(lo, hi, n1)
+            if lo <= r1p <= hi:
+                r1s = np.append(r1s, r1p)
+            if r1s.size == 0:
+                return
+            ilo, ihi = self.region.r4_interval(r1s)
+            r1b = np.tile(r1s, cols.size)  # (c * m,): one Newton iteration per column
+            r4 = np.full(r1b.size, r4p)
+            lo_b, hi_b = np.tile(ilo, cols.size), np.tile(np.maximum(ilo, ihi), cols.size)
+            pick = np.repeat(cols, r1s.size)
+            rows = np.arange(r1b.size)
+            for _it in range(5):
+                packed, _ = six_axis_packed(self.robot.dh, self.target,
+                                            np.concatenate([r1b, r1b]),
+                                            np.concatenate([r4, r4 + h]), self.prev, free)
+                f = packed[rows, pick] - limit
+                df = (packed[rows + r1b.size, pick] - packed[rows, pick]) / h
+                safe = np.where(np.abs(df) > 1e-12, df, 1.0)
+                r4 = np.clip(r4 - np.where(np.abs(df) > 1e-12, f / safe, 0.0), lo_b, hi_b)
+            self.evaluate(np.concatenate([r1b] * 3),
+                          np.concatenate([r4, r4 - 1e-11, r4 + 1e-11]))
+            if self.best_q is None:
+                return
+            step = (hi - lo) / max(n1 - 1, 1)
+            if step < 1e-10:
+                return
+            c = float(self.best_q[TRACK])
+            lo, hi = c - 2 * step, c + 2 * step
 
     # -- the 2-D search ---------------------------------------------------------------------
     def box_search(self, n1: int = 48, n4: int = 12, keep: int = 3, zoom: float = 0.4,
@@ -480,6 +568,8 @@ def _solve_one(robot: Robot, target: Array, previous: Array, bounds: _Bounds) ->
     if prob.try_certificate() or prob.line_search():
         return prob
     prob.box_search()
+    for axis, limit in prob.binding_axes():
+        prob.boundary_search(axis, limit)
     return prob
 
 

@@ -1,0 +1,245 @@
+"""The whole-shot solver (the default ``shot`` objective) against independent facts.
+
+Max feasible speed from the timing stage against the papers' per-frame optimum on a set of
+shots; the dynamic programme against brute force; the refinement against its start; FK of every
+frame against its pose; margins recomputed from link geometry; the move to the start against
+ruckig's time-optimal trajectory.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from camtraj import Robot
+from camtraj.ik import path_margins, solve_path, solve_path_report
+from camtraj.ik.refine import refine
+from camtraj.ik.shot import candidates, chain_costs, choose, viterbi
+from camtraj.ik.shot_cost import ShotCost
+from camtraj.timing import Limits, TimingLimitError, time_shot
+
+from .conftest import camera_path, pose_error
+from .shot_set import SetShot, shot_set
+
+WHIP = "whip_pan"  # 150 deg of pan in 8 frames: faster than any wrist axis, by design
+
+
+def max_speed(robot: Robot, q: np.ndarray, fps: float) -> float:
+    """The timing stage's maximum feasible speed of a joint path (fraction of real time).
+
+    A path whose spline leaves a position limit between frames still gets the speed its
+    velocities, accelerations and jerks allow (the timing stage reports it with the error).
+    """
+    times = np.arange(q.shape[0]) / fps
+    try:
+        return float(time_shot(q, times, Limits.from_robot(robot), mode="scale").report.max_speed)
+    except TimingLimitError as exc:
+        return float(exc.max_speed)
+
+
+@pytest.fixture(scope="module")
+def solved(robot: Robot, tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, object]]:
+    out = []
+    for shot in shot_set(robot, tmp_path_factory.mktemp("shots")):
+        rep = solve_path_report(robot, shot.targets, frame_interval=1.0 / shot.fps)
+        paper = solve_path(robot, shot.targets, objective="paper")
+        out.append({"shot": shot, "rep": rep, "paper": paper,
+                    "speed": max_speed(robot, rep.q, shot.fps),
+                    "paper_speed": max_speed(robot, paper, shot.fps)})
+    return out
+
+
+def test_the_set_covers_the_issue(solved: list[dict[str, object]]) -> None:
+    shots = [s["shot"] for s in solved]
+    assert len(shots) >= 12
+    assert all(isinstance(s, SetShot) for s in shots)
+    seconds = [s.targets.shape[0] / s.fps for s in shots]  # type: ignore[union-attr]
+    assert min(seconds) <= 1.0 and max(seconds) >= 60.0
+
+
+def test_default_is_at_least_as_fast_as_paper_on_every_shot(
+        solved: list[dict[str, object]]) -> None:
+    ratios = []
+    for s in solved:
+        name = s["shot"].name  # type: ignore[attr-defined]
+        fast, paper = float(s["speed"]), float(s["paper_speed"])  # type: ignore[arg-type]
+        assert fast >= paper, f"{name}: shot {fast:.3f} < paper {paper:.3f}"
+        ratios.append(fast / paper)
+    assert float(np.median(ratios)) >= 1.2
+
+
+def test_every_frame_reaches_its_pose_without_flips(
+        robot: Robot, solved: list[dict[str, object]]) -> None:
+    for s in solved:
+        shot, q = s["shot"], s["rep"].q  # type: ignore[attr-defined]
+        dp, dr = pose_error(robot.fk(q), shot.targets)
+        assert dp < 1e-9 and dr < 1e-9, shot.name
+        assert np.all(robot.within_limits(q, tol=1e-12)), shot.name
+        steps = np.abs(np.diff(q, axis=0))
+        # a flip turns pan and roll by ~180 deg in one frame
+        assert steps[:, 1:].max() < math.radians(60.0), shot.name
+        if shot.name != WHIP:
+            bound = robot.max_velocity / shot.fps
+            assert np.all(steps <= bound * (1 + 1e-9) + 1e-12), shot.name
+            assert s["rep"].within_step.all()  # type: ignore[attr-defined]
+
+
+def test_tilt_keeps_away_from_its_limits_and_the_singularity_on_the_samples(
+        robot: Robot, solved: list[dict[str, object]]) -> None:
+    for s in solved:
+        shot, q = s["shot"], s["rep"].q  # type: ignore[attr-defined]
+        if not shot.sample:
+            continue
+        tilt = q[:, 6]
+        to_limit = np.minimum(tilt - robot.lower[6], robot.upper[6] - tilt)
+        to_singular = np.abs(np.abs(tilt) - math.pi / 2)
+        assert to_limit.min() >= math.radians(15.0), shot.name
+        assert to_singular.min() >= math.radians(15.0), shot.name
+
+
+def test_reported_margins_match_the_link_geometry(
+        robot: Robot, solved: list[dict[str, object]]) -> None:
+    for s in solved[:6]:
+        rep = s["rep"]
+        q = rep.q  # type: ignore[attr-defined]
+        m = rep.margins  # type: ignore[attr-defined]
+        to_lim = np.minimum(q - robot.lower, robot.upper - q).min(axis=0)
+        np.testing.assert_allclose(m.to_limits, to_lim, atol=1e-12)
+        frames = robot.link_frames(q)
+        shoulder, elbow, wrist = frames[:, 2, :3, 3], frames[:, 4, :3, 3], frames[:, 6, :3, 3]
+        se = np.linalg.norm(elbow - shoulder, axis=1)
+        ew = np.linalg.norm(wrist - elbow, axis=1)
+        sw = np.linalg.norm(wrist - shoulder, axis=1)
+        interior = np.arccos(np.clip((se**2 + ew**2 - sw**2) / (2 * se * ew), -1, 1))
+        # the elbow point of the DH chain is the arm's bend, so the stretch distance is the
+        # triangle shoulder-elbow-wrist's exterior angle there
+        assert m.stretch == pytest.approx(float((math.pi - interior).min()), abs=1e-6)
+        assert m.wrist == pytest.approx(
+            float(np.abs(np.abs(q[:, 6]) - math.pi / 2).min()), abs=1e-9)
+
+
+def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
+    """Every sequence of a coarse candidate set on a short shot, against the Viterbi pass.
+
+    4 candidate points a frame (1 track value per reachable interval x 2 extend values): per
+    branch label all 4^8 sequences of 8 frames, and with labels merged (32 states a frame)
+    all 32^4 sequences of 4 frames.
+    """
+    targets = camera_path(robot, 240)[::24][:8]  # 8 frames, a large move between them
+    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
+    cand = candidates(robot, targets, n_track=1, n_extend=2, n_hold=0)
+    for merged, frames in ((False, 8), (True, 4)):
+        unary, pair = chain_costs(cost, cand, merged)
+        u, p = unary[:frames], pair[:frames - 1]
+        best, _ = viterbi(u, p)
+        chains, states = u.shape[1:]
+        seqs = np.array(np.unravel_index(np.arange(states ** frames), (states,) * frames)).T
+        for c in range(chains):
+            total = u[np.arange(frames), c, seqs].sum(axis=1)
+            total += p[np.arange(frames - 1), c, seqs[:, :-1], seqs[:, 1:]].sum(axis=1)
+            brute = float(total.min())
+            if math.isfinite(brute):
+                assert best[c] == pytest.approx(brute, rel=1e-12)
+            else:
+                assert not math.isfinite(best[c])
+    # the tables say what a path costs: recompute the chosen path's cost from its joints
+    choice = choose(cost, cand, robot.home)
+    assert choice is not None
+    y = choice.y
+    q = y[:, :8]
+    direct = float(cost.unary(y).sum() + cost.first_order(cost.steps(q[:-1], q[1:])).sum()
+                   + cost.edge_cost(q[0], q[1]) + cost.edge_cost(q[-1], q[-2]))
+    assert choice.cost == pytest.approx(direct, rel=1e-9)
+
+
+@pytest.mark.parametrize("n", [12, 30, 120])
+def test_refinement_is_never_worse_than_the_dynamic_programme(robot: Robot, n: int) -> None:
+    targets = camera_path(robot, n)
+    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
+    cand = candidates(robot, targets, n_track=2, n_extend=2)
+    choice = choose(cost, cand, robot.home)
+    assert choice is not None
+    rows = np.arange(n)
+    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
+    j = cand.interval[rows, choice.point]
+    ref = refine(robot, cost, targets, choice.branch, x0, choice.y,
+                 cand.track_lo[rows, j], cand.track_hi[rows, j])
+    start = cost.total(choice.y)
+    assert ref.cost <= start
+    assert ref.cost == pytest.approx(cost.total(ref.y), rel=1e-12)
+    assert np.abs(ref.x - x0).max() > 1e-6  # it moved off the grid
+    dp, dr = pose_error(robot.fk(ref.y[:, :8]), targets)
+    assert dp < 1e-9 and dr < 1e-9
+
+
+def test_the_first_frame_is_chosen_for_the_shot_not_the_start(robot: Robot) -> None:
+    targets = camera_path(robot, 48)
+    a = solve_path_report(robot, targets, robot.home, frame_interval=1 / 24)
+    elsewhere = robot.home.copy()
+    elsewhere[0], elsewhere[3], elsewhere[1] = 10.0, 1.2, 1.0
+    b = solve_path_report(robot, targets, elsewhere, frame_interval=1 / 24)
+    # the same configurations; a revolute axis may take another whole turn (the one nearer the
+    # start, within its limits)
+    turns = (b.q - a.q) / (2 * math.pi)
+    np.testing.assert_allclose(turns, np.rint(turns), atol=1e-12)
+    assert np.all(np.rint(turns)[:, [0, 3]] == 0)
+    np.testing.assert_allclose(b.move_to_start.travel, b.q[0] - elsewhere, atol=1e-15)
+    assert a.move_to_start.duration > 0.0 and b.move_to_start.duration > 0.0
+
+
+def test_move_to_start_duration_is_ruckigs_time_optimal_move(robot: Robot) -> None:
+    from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+    targets = camera_path(robot, 24)
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        start = rng.uniform(robot.lower * 0.5, robot.upper * 0.5)
+        rep = solve_path_report(robot, targets, start, frame_interval=1 / 24)
+        inp = InputParameter(8)
+        inp.current_position, inp.target_position = list(start), list(rep.q[0])
+        inp.current_velocity = inp.current_acceleration = [0.0] * 8
+        inp.target_velocity = inp.target_acceleration = [0.0] * 8
+        inp.max_velocity = list(robot.max_velocity)
+        inp.max_acceleration = list(robot.max_acceleration)
+        inp.max_jerk = list(robot.max_jerk)
+        traj = Trajectory(8)
+        assert Ruckig(8).calculate(inp, traj) == Result.Working
+        assert rep.move_to_start.duration == pytest.approx(traj.duration, rel=1e-6)
+
+
+def test_margins_of_a_path_at_a_limit(robot: Robot) -> None:
+    q = np.zeros((3, 8))
+    q[:, 3] = 0.75  # extend mid-range ...
+    q[1, 3] = robot.upper[3]  # ... but fully out on frame 1
+    q[2, 6] = math.radians(80.0)  # tilt 10 deg from the singularity
+    m = path_margins(robot, q)
+    assert m.to_limits[3] == 0.0 and m.to_limits_frame[3] == 1
+    assert m.wrist == pytest.approx(math.radians(10.0), abs=1e-12) and m.wrist_frame == 2
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "word"),
+    [
+        ({"start": np.full(8, 1e300)}, "start"),
+        ({"start": [0.0] * 7}, "start"),
+        ({"frame_interval": 0.0}, "frame_interval"),
+        ({"frame_interval": math.nan}, "frame_interval"),
+        ({"objective": "smooth"}, "objective"),
+        ({"frame_numbers": [1, 2]}, "frame_numbers"),
+    ],
+)
+def test_malformed_path_arguments_raise_value_error_naming_them(
+        robot: Robot, kwargs: dict[str, object], word: str) -> None:
+    targets = camera_path(robot, 5)
+    with pytest.raises(ValueError, match=word):
+        solve_path_report(robot, targets, **kwargs)  # type: ignore[arg-type]
+
+
+def test_non_finite_targets_raise_value_error(robot: Robot) -> None:
+    targets = camera_path(robot, 5)
+    targets[3, 0, 3] = math.nan
+    with pytest.raises(ValueError, match=r"target 3"):
+        solve_path(robot, targets)
+
