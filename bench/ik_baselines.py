@@ -1,7 +1,7 @@
 """Baseline inverse-kinematics solvers that ``bench/run.py`` compares the SM method against.
 
-Every baseline minimises the same objective as :func:`camtraj.ik.solve_ik` with
-``objective="paper"``: ``F = sum(w_i * |q_i - q_i,prev|)`` over the joint vector q (8,) [m, rad]
+Every baseline minimises the same objective as :func:`camtraj.ik.solve_ik` (the
+``paper`` objective): ``F = sum(w_i * |q_i - q_i,prev|)`` over the joint vector q (8,) [m, rad]
 that puts the flange on ``target`` (``flange2base``, (4, 4) [m]) inside the robot's position
 limits, and returns a :class:`BaselineResult`.
 
@@ -362,7 +362,7 @@ def dense_ik(
         refine: Zoom passes (each a 41 x 41 grid ten times finer around the best point).
     """
     try:
-        sol = traverse(robot, target, previous, objective="paper", n1=n1, n4=n4, refine=refine)
+        sol = traverse(robot, target, previous, n1=n1, n4=n4, refine=refine)
     except UnreachableError as exc:
         return BaselineResult(np.full(8, np.nan), math.inf, 0, False, str(exc))
     evaluations = n1 * (n4 + 3) + refine * 41 * 44

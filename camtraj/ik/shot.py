@@ -175,6 +175,7 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, 
     y = cand.y.transpose(0, 2, 1, 3)  # (n, 8, G, 10)
     ok = cand.ok.transpose(0, 2, 1)
     n, b, g = ok.shape
+    shared = not merged  # every chain has the same candidate points (track, extend)
     if merged:
         y, ok = y.reshape(n, 1, b * g, N_MEASURES), ok.reshape(n, 1, b * g)
     else:
@@ -188,7 +189,9 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, 
     for a in range(0, n - 1, per):
         e = min(a + per, n - 1)
         for i in range(8):
-            d = q[i, a + 1:e + 1, :, None, :] - q[i, a:e, :, :, None]
+            # track and extend do not depend on the branch: one chain's values serve all
+            qi = q[i, :, :1] if shared and not REVOLUTE[i] else q[i]
+            d = qi[a + 1:e + 1, :, None, :] - qi[a:e, :, :, None]
             pair[a:e] += cost.axis_step_cost(i, d)
     if n > 1:  # run-up and run-out room at the shot's ends
         qs = np.moveaxis(q, 0, -1)  # (n, C, S, 8)

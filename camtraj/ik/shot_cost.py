@@ -34,6 +34,7 @@ from camtraj.robot import PRISMATIC, REVOLUTE, Robot
 
 Array = NDArray[np.float64]
 
+TWO_PI = 2.0 * math.pi
 N_MEASURES = 10  # the 8 joints, the wrist singularity distance, the full-stretch distance
 
 
@@ -87,21 +88,24 @@ class ShotCost:
     def steps(self, qa: Array, qb: Array) -> Array:
         """Velocity usage z1 (..., 8) of a step from qa to qb (revolute differences wrapped)."""
         d = qb - qa
-        d = np.where(REVOLUTE, (d + math.pi) % (2.0 * math.pi) - math.pi, d)
+        d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
         return np.asarray(d / self.vel)
 
     def axis_step_cost(self, axis: int, d: Array) -> Array:
         """:meth:`first_order`'s share of one axis for steps ``d`` (any shape) [m, rad]."""
         if REVOLUTE[axis]:
-            d = (d + math.pi) % (2.0 * math.pi) - math.pi
+            d = d - TWO_PI * np.rint(d * (1.0 / TWO_PI))
         a = np.abs(d)
         a *= 1.0 / self.vel[axis]
-        out = a * (self.motion_coef[axis] + self.velocity * a)
-        a -= 1.0
-        np.maximum(a, 0.0, out=a)
-        a *= a
-        a *= self.overspeed
-        out += a
+        out = a * self.velocity
+        out += self.motion_coef[axis]
+        out *= a
+        if a.size and a.max() > 1.0:  # the overspeed penalty, where a step exceeds v_max
+            a -= 1.0
+            np.maximum(a, 0.0, out=a)
+            a *= a
+            a *= self.overspeed
+            out += a
         return np.asarray(out)
 
     def first_order(self, z1: Array) -> Array:
@@ -138,7 +142,7 @@ class ShotCost:
         pushed out by the stopping distance of its velocity, (..., 8), and d p / d q_edge
         (d p / d q_inner is 1 minus it)."""
         d = q_edge - q_inner
-        d = np.where(REVOLUTE, (d + math.pi) % (2.0 * math.pi) - math.pi, d)
+        d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
         dist, slope = self.stop_distance(np.abs(d) / self.dt)
         return np.asarray(q_edge + np.sign(d) * dist), np.asarray(1.0 + slope / self.dt)
 
