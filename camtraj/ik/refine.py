@@ -135,10 +135,16 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
 
 
 def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Array], Array]:
-    """Gauss-Newton normal matrix (as 2 x 2 blocks on block diagonals 0..3) and gradient."""
+    """Gauss-Newton normal matrix (as 2 x 2 blocks on block diagonals 0..3) and gradient.
+
+    The difference terms are first gathered per axis in the joints: ``M[d][p, i]`` is the
+    curvature coupling frames p and p + d through axis i, ``gq`` the gradient in the joints;
+    then the chain rule through the per-frame Jacobians (n, 10, 2) gives the blocks.
+    """
     n = y.shape[0]
     H = [np.zeros((n, 2, 2)) for _ in range(4)]
-    g = np.zeros((n, 2))
+    M = [np.zeros((n, 8)) for _ in range(4)]
+    gq = np.zeros((n, 8))
     q, G = y[:, :8], grad_y[:, :8, :]
     for order, stencil in _STENCILS:
         m = n - order
@@ -161,15 +167,17 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
             z = np.diff(q, 3, axis=0) / cost.jerk
             dz, ddz = 2 * cost.jerk_weight * z, np.full_like(z, 2 * cost.jerk_weight)
             scale = cost.jerk
-        Gs = G / scale[:, None]  # (n, 8, 2)
+        dz, w = dz / scale, ddz / (scale * scale)
         for ia, ca in enumerate(stencil):
-            Ga = Gs[ia:ia + m]
-            g[ia:ia + m] += ca * (dz[:, :, None] * Ga).sum(axis=1)
-            wa = ddz[:, :, None] * Ga
+            gq[ia:ia + m] += ca * dz
             for ib in range(ia, stencil.size):
-                Gb = Gs[ib:ib + m]
-                H[ib - ia][ia:ia + m] += ca * stencil[ib] * (
-                    wa[:, :, :, None] * Gb[:, :, None, :]).sum(axis=1)
+                M[ib - ia][ia:ia + m] += (ca * stencil[ib]) * w
+    g = np.einsum("ki,kip->kp", gq, G)
+    for d in range(4):
+        if n - d <= 0:
+            continue
+        Ga, Gb = M[d][: n - d, :, None] * G[: n - d], G[d:]
+        H[d][: n - d] = np.einsum("kip,kiq->kpq", Ga, Gb)
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
     # singularity distance itself)
     e = cost.intrusion(y)
