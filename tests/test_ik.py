@@ -194,3 +194,22 @@ def test_non_finite_target_is_a_value_error(robot: Robot) -> None:
     T[0, 3] = math.inf
     with pytest.raises(ValueError, match="target"):
         solve_ik(robot, T)
+
+
+def test_one_branch_closed_form_equals_the_branch_of_all(robot: Robot) -> None:
+    from camtraj.ik.closed_form import six_axis_branch
+
+    rng = np.random.default_rng(6)
+    q = rng.uniform(robot.lower, robot.upper, size=(400, 8))
+    T = robot.fk(q)
+    r1 = q[:, 0] + rng.normal(0, 0.3, 400)
+    r4 = np.clip(q[:, 3] + rng.normal(0, 0.2, 400), 0.0, 1.5)
+    prev = q + rng.normal(0, 0.1, (400, 8))
+    lo, hi = np.full(8, -np.inf), np.full(8, np.inf)
+    lo[4], hi[4] = -10.0, 10.0  # wide limits: compare every value, not only feasible ones
+    for limits in ((lo, hi), (robot.lower, robot.upper)):
+        qs, ok = six_axis_solutions(robot.dh, T, r1, r4, prev, *limits)
+        for b in range(8):
+            qb, okb = six_axis_branch(robot.dh, T, r1, r4, prev, *limits, np.full(400, b))
+            np.testing.assert_array_equal(okb, ok[:, b])
+            np.testing.assert_allclose(qb[okb], qs[okb, b], atol=1e-12)

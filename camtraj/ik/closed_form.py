@@ -209,3 +209,80 @@ def nearest_equivalent(x: Array, prev: Array, lo: Array, hi: Array) -> Array:
     alt_in = (alt >= lo) & (alt <= hi)
     return np.where(out_y & alt_in, alt, y)
 
+
+
+def six_axis_branch(
+    dh: DHConstants,
+    target: Array,
+    r1: Array,
+    r4: Array,
+    previous: Array,
+    lower: Array,
+    upper: Array,
+    branch: NDArray[np.intp],
+) -> tuple[Array, NDArray[np.bool_]]:
+    """One closed-form branch per candidate: :func:`six_axis_solutions` restricted to it.
+
+    Args:
+        dh: The robot's DH constants.
+        target: Flange poses (N, 4, 4) [m], one per candidate.
+        r1, r4: Track and extend values (N,) [m].
+        previous: Joint vectors (N, 8) the revolute axes stay nearest to.
+        lower, upper: Position limits (8,).
+        branch: Branch index 0..7 per candidate (N,): rotate back (4), elbow (2), wrist flip (1).
+
+    Returns:
+        Joint vectors (N, 8) and their feasibility (N,) (no stretch or wrist margin).
+    """
+    s_i = 1.0 - 2.0 * (branch >> 2)  # front / back
+    s_j = 1.0 - 2.0 * ((branch >> 1) & 1)  # elbow
+    s_f = 1.0 - 2.0 * (branch & 1)  # wrist flip
+    W = target[:, :3, 3]
+    R = target[:, :3, :3]
+    dx = W[:, 0] - dh.r10 - r1
+    dy = W[:, 1]
+    dz = W[:, 2] - dh.r2
+    hor = np.hypot(dx, dy)
+    ws2 = np.maximum(hor * hor + dz * dz, 1e-300)
+    th2f = np.arctan2(dy, dx)
+    if hor.min() <= 1e-12:
+        th2f = np.where(hor > 1e-12, th2f, previous[:, ROTATE])
+    th2 = th2f + math.pi * (s_i < 0)
+    rho = hor * s_i
+    L = r4 + dh.r40
+    dse2 = L * L + dh.l3 * dh.l3
+    cos_g = (ws2 + dse2 - dh.r6 * dh.r6) / (2.0 * np.sqrt(dse2 * ws2))
+    cos_e = (dse2 + dh.r6 * dh.r6 - ws2) / (2.0 * dh.r6 * np.sqrt(dse2))
+    reach_ok = (np.abs(cos_g) <= 1.0 + EDGE) & (cos_e >= -1.0 - EDGE)
+    gamma = np.arccos(np.clip(cos_g, -1.0, 1.0))
+    a = np.arctan2(dz, rho) - np.arctan2(dh.l3, L) - gamma * s_j
+    ca, sa = np.cos(a), np.sin(a)
+    psi = np.arctan2(rho - (L * ca - dh.l3 * sa), -(dz - (L * sa + dh.l3 * ca)))
+    cs, ss = np.cos(psi), -np.sin(psi)
+    c2, s2 = np.cos(th2), np.sin(th2)
+    P0 = c2 * R[:, 0, 0] + s2 * R[:, 1, 0]
+    P1 = c2 * R[:, 0, 1] + s2 * R[:, 1, 1]
+    P2 = c2 * R[:, 0, 2] + s2 * R[:, 1, 2]
+    m02 = cs * P2 - ss * R[:, 2, 2]
+    m12 = s2 * R[:, 0, 2] - c2 * R[:, 1, 2]
+    m22 = -ss * P2 - cs * R[:, 2, 2]
+    m20 = -ss * P0 - cs * R[:, 2, 0]
+    m21 = -ss * P1 - cs * R[:, 2, 1]
+    c7abs = np.hypot(m02, m12)
+    th7 = np.arctan2(np.clip(m22, -1.0, 1.0), c7abs * s_f)
+    th6 = np.arctan2(m12 * s_f, m02 * s_f)
+    th8 = np.arctan2(-m21 * s_f, -m20 * s_f)
+    singular = c7abs < WRIST_EPS
+    if singular.any():  # pan and roll aligned: keep the previous pan, roll takes the rest
+        m00 = cs * P0 - ss * R[:, 2, 0]
+        m10 = s2 * R[:, 0, 0] - c2 * R[:, 1, 0]
+        s7s = np.where(m22 >= 0, 1.0, -1.0)
+        combo = np.arctan2(s7s * m10, s7s * m00)
+        keep = previous[:, PAN]
+        th6 = np.where(singular, keep, th6)
+        th8 = np.where(singular, np.where(s7s > 0, keep - combo, combo - keep), th8)
+    q = np.stack([r1, th2, -a, r4, a - psi, th6, th7, th8], axis=1)
+    rev = np.array([False, True, True, False, True, True, True, True])
+    q[:, rev] = nearest_equivalent(q[:, rev], previous[:, rev], lower[rev], upper[rev])
+    ok = reach_ok & np.all((q >= lower - EDGE) & (q <= upper + EDGE), axis=1)
+    return q, ok

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
-from camtraj.ik.shot import measures
+from camtraj.ik.shot import branch_measures
 from camtraj.ik.shot_cost import N_MEASURES, ShotCost
 from camtraj.robot import Robot
 
@@ -84,7 +84,6 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
     if n < 2:
         return Refined(x, y, j, 0)
     targets3 = np.concatenate([targets] * 3)
-    rows = np.arange(n)
     b3 = np.tile(branch, 3)
     rel = 0.0
     for rnd in range(4 * rounds):
@@ -95,9 +94,9 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         for _attempt in range(2):
             pts = np.concatenate([x, x + [_H, 0] * side[:, :1], x + [0, _H] * side[:, 1:]])
             prev = np.concatenate([y[:, :8]] * 3)
-            ya, oka = measures(robot, targets3, pts[:, 0], pts[:, 1], prev)
-            ys = ya[np.arange(3 * n), b3].reshape(3, n, N_MEASURES)
-            oks = oka[np.arange(3 * n), b3].reshape(3, n)
+            ya, oka = branch_measures(robot, targets3, pts[:, 0], pts[:, 1], prev, b3)
+            ys = ya.reshape(3, n, N_MEASURES)
+            oks = oka.reshape(3, n)
             for v in range(2):
                 good = oks[v + 1][:, None]
                 grad_y[:, :, v] = np.where(good, (ys[v + 1] - y) / (_H * side[:, v:v + 1]),
@@ -111,9 +110,7 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         for _try in range(6):
             step = _solve_banded(H, g, mu)
             xn = corridor.project(x + step)
-            yn_all, okn = measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8])
-            yn = yn_all[rows, branch]
-            keep = okn[rows, branch]
+            yn, keep = branch_measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8], branch)
             xn = np.where(keep[:, None], xn, x)
             yn = np.where(keep[:, None], yn, y)
             jn = cost.total(yn)

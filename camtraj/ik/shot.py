@@ -34,6 +34,7 @@ from camtraj.ik.closed_form import (
     TILT,
     TRACK,
     packed_limits,
+    six_axis_branch,
     six_axis_packed,
 )
 from camtraj.ik.margins import stretch_distance, wrist_distance
@@ -160,6 +161,16 @@ def measures(robot: Robot, targets: Array, r1: Array, r4: Array,
     sd = stretch_distance(robot.dh, targets[:, :3, 3], r1, r4)
     y = np.concatenate([q, wrist_distance(q[..., TILT])[..., None],
                         np.broadcast_to(sd[:, None, None], (*q.shape[:2], 1))], axis=-1)
+    return y, ok
+
+
+def branch_measures(robot: Robot, targets: Array, r1: Array, r4: Array, previous: Array,
+                    branch: IntArray) -> tuple[Array, NDArray[np.bool_]]:
+    """:func:`measures` on one given branch per point: ``y`` (N, 10), feasibility (N,)."""
+    q, ok = six_axis_branch(robot.dh, targets, r1, r4, previous, robot.lower, robot.upper,
+                            branch)
+    sd = stretch_distance(robot.dh, targets[:, :3, 3], r1, r4)
+    y = np.concatenate([q, wrist_distance(q[:, TILT])[:, None], sd[:, None]], axis=1)
     return y, ok
 
 
