@@ -694,7 +694,8 @@ def print_speeds(res: dict[str, Any]) -> None:
          f"x{fmt(min(shot_paper))}; median shot / old smooth "
          f"x{fmt(statistics.median(shot_smooth)) if shot_smooth else '-'}",
          "a path whose spline leaves a position limit between frames is given the speed its "
-         "velocities, accelerations and jerks allow (the timing stage's number with the error)",
+         "velocities, accelerations and jerks allow (the timing stage's number with the error); "
+         "'-': no speed at all (its run-up or run-out leaves a position limit)",
          *([f"old smooth: {res['smooth_note'][:200]}"] if res.get("smooth_note") else [])],
     )
 

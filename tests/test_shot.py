@@ -243,3 +243,29 @@ def test_non_finite_targets_raise_value_error(robot: Robot) -> None:
     with pytest.raises(ValueError, match=r"target 3"):
         solve_path(robot, targets)
 
+
+
+def test_the_summary_reports_margins_and_the_move_to_start(robot: Robot) -> None:
+    from camtraj.convert import ConvertOptions, analyse, summary
+
+    from .shot_set import SHOTS
+
+    shot = SHOTS / "blender_crane_up.usda"
+    options = ConvertOptions(start_from=(1.0, 0.0, 0.0, 0.2, -0.5, 0.0, 0.0, 0.0))
+    analysis = analyse(shot, options)
+    report = summary(analysis, shot, None, options)
+    assert analysis.path is not None
+    q = analysis.path.q
+    tilt = q[:, 6]
+    m = report["margins"]
+    assert m["to_limits"]["tilt"] == pytest.approx(
+        math.degrees(float(np.minimum(tilt - robot.lower[6], robot.upper[6] - tilt).min())))
+    assert m["to_limits"]["track"] == pytest.approx(
+        float(np.minimum(q[:, 0] - robot.lower[0], robot.upper[0] - q[:, 0]).min()))
+    assert m["wrist_singularity_deg"] == pytest.approx(
+        math.degrees(float(np.abs(np.abs(tilt) - math.pi / 2).min())), abs=1e-6)
+    assert 0.0 < m["full_stretch_deg"] < 180.0
+    start = report["move_to_start"]
+    assert start["extent"]["track"] == pytest.approx(abs(q[0, 0] - 1.0))
+    assert start["extent"]["elbow"] == pytest.approx(math.degrees(abs(q[0, 4] + 0.5)))
+    assert start["duration_s"] > 0.0
