@@ -203,10 +203,46 @@ class FrameMap:
 
 
 def position_use(q: Array, limits: Limits) -> Array:
+    """``|q - mid| / half_range`` per axis: 0 in the middle of the range, 1 on a limit."""
     mid = 0.5 * (limits.upper + limits.lower)
     half = 0.5 * (limits.upper - limits.lower)
     use: Array = np.abs(q - mid) / half
     return use
+
+
+@dataclass(frozen=True, eq=False)
+class Peaks:
+    """Per-axis extremes of a set of samples, each (8,): the lowest and highest position and
+    the largest velocity, acceleration and jerk magnitude."""
+
+    q_min: Array
+    q_max: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+
+    @classmethod
+    def of(cls, s: Samples) -> Peaks:
+        return cls(-_column_max(-s.q), _column_max(s.q), _column_max(np.abs(s.qd)),
+                   _column_max(np.abs(s.qdd)), _column_max(np.abs(s.qddd)))
+
+    def use(self, limits: Limits) -> dict[str, Array]:
+        """Fraction of every limit used, per quantity, each (8,) (see ``position_use``)."""
+        pos = np.maximum(position_use(self.q_min, limits), position_use(self.q_max, limits))
+        return {"position": pos, "velocity": self.qd / limits.velocity,
+                "acceleration": self.qdd / limits.acceleration, "jerk": self.qddd / limits.jerk}
+
+
+def _column_max(a: Array, rows: int = 64) -> Array:
+    """``a.max(axis=0)`` for an (m, k) array, m >= 1, without numpy's slow strided reduce:
+    blocks of ``rows`` rows are reduced as one long row first."""
+    m, k = a.shape
+    cut = m - m % rows
+    parts = [a[cut:].max(axis=0)] if cut < m else []
+    if cut:
+        parts.append(a[:cut].reshape(-1, rows * k).max(axis=0).reshape(rows, k).max(axis=0))
+    out: Array = np.maximum.reduce(parts)
+    return out
 
 
 def slowdown(s: Samples, limits: Limits) -> float:
@@ -216,9 +252,8 @@ def slowdown(s: Samples, limits: Limits) -> float:
     """
     if s.q.shape[0] == 0:
         return 0.0
-    kv = float(np.max(np.abs(s.qd) / limits.velocity))
-    ka = float(np.max(np.abs(s.qdd) / limits.acceleration))
-    kj = float(np.max(np.abs(s.qddd) / limits.jerk))
+    use = Peaks.of(s).use(limits)
+    kv, ka, kj = (float(use[k].max()) for k in ("velocity", "acceleration", "jerk"))
     return max(kv, math.sqrt(ka), math.pow(kj, 1.0 / 3.0))
 
 
@@ -228,30 +263,29 @@ def violations(
     """Every (axis, quantity) exceeding its limit by more than ``rtol``, worst first."""
     out: list[LimitViolation] = []
     revolute = limits.revolute
-    pos_use = position_use(s.q, limits)
-    for j, name in enumerate(limits.names):
-        over = np.flatnonzero(pos_use[:, j] > 1.0 + rtol)
-        if over.size:
-            k = int(over[np.argmax(pos_use[over, j])])
-            peak = float(s.q[k, j])
-            bound = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
-            out.append(LimitViolation(
-                axis=name, quantity="position", peak=peak, limit=bound,
-                ratio=float(pos_use[k, j]), frames=frame_map.spans(over),
-                revolute=bool(revolute[j]),
-            ))
-        for quantity, values in (("velocity", s.qd), ("acceleration", s.qdd),
-                                 ("jerk", s.qddd)):
+    use = Peaks.of(s).use(limits)
+    for j in np.flatnonzero(use["position"] > 1.0 + rtol).tolist():
+        mid = 0.5 * (limits.upper[j] + limits.lower[j])
+        pos_use = np.abs(s.q[:, j] - mid) / (0.5 * (limits.upper[j] - limits.lower[j]))
+        over = np.flatnonzero(pos_use > 1.0 + rtol)
+        k = int(over[np.argmax(pos_use[over])])
+        peak = float(s.q[k, j])
+        bound = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
+        out.append(LimitViolation(
+            axis=limits.names[j], quantity="position", peak=peak, limit=bound,
+            ratio=float(pos_use[k]), frames=frame_map.spans(over), revolute=bool(revolute[j]),
+        ))
+    for quantity, values in (("velocity", s.qd), ("acceleration", s.qdd), ("jerk", s.qddd)):
+        for j in np.flatnonzero(use[quantity] > 1.0 + rtol).tolist():
             lim = float(limits.bound(quantity)[j])
             ratio = np.abs(values[:, j]) / lim
             over = np.flatnonzero(ratio > 1.0 + rtol)
-            if over.size:
-                k = int(over[np.argmax(ratio[over])])
-                out.append(LimitViolation(
-                    axis=name, quantity=quantity, peak=float(values[k, j]), limit=lim,
-                    ratio=float(ratio[k]), frames=frame_map.spans(over),
-                    revolute=bool(revolute[j]),
-                ))
+            k = int(over[np.argmax(ratio[over])])
+            out.append(LimitViolation(
+                axis=limits.names[j], quantity=quantity, peak=float(values[k, j]), limit=lim,
+                ratio=float(ratio[k]), frames=frame_map.spans(over),
+                revolute=bool(revolute[j]),
+            ))
     out.sort(key=lambda v: (v.quantity != "position", -v.speed_needed if
                             math.isfinite(v.speed_needed) else -v.ratio))
     return out
@@ -260,18 +294,13 @@ def violations(
 def peak_use(
     s: Samples, limits: Limits
 ) -> tuple[dict[str, dict[str, float]], dict[str, tuple[float, float]]]:
-    pos = position_use(s.q, limits).max(axis=0)
-    vel = (np.abs(s.qd) / limits.velocity).max(axis=0)
-    acc = (np.abs(s.qdd) / limits.acceleration).max(axis=0)
-    jerk = (np.abs(s.qddd) / limits.jerk).max(axis=0)
-    use = {
-        name: {"position": float(pos[j]), "velocity": float(vel[j]),
-               "acceleration": float(acc[j]), "jerk": float(jerk[j])}
-        for j, name in enumerate(limits.names)
-    }
-    qmin, qmax = s.q.min(axis=0), s.q.max(axis=0)
-    ranges = {name: (float(qmin[j]), float(qmax[j])) for j, name in enumerate(limits.names)}
-    return use, ranges
+    peaks = Peaks.of(s)
+    use = peaks.use(limits)
+    table = {name: {quantity: float(use[quantity][j]) for quantity in QUANTITIES}
+             for j, name in enumerate(limits.names)}
+    ranges = {name: (float(peaks.q_min[j]), float(peaks.q_max[j]))
+              for j, name in enumerate(limits.names)}
+    return table, ranges
 
 
 def fmt(value: float, quantity: str, revolute: bool) -> str:

@@ -152,20 +152,20 @@ class FramePath:
     def on_grid(self, ticks: int) -> tuple[Array, list[Array]]:
         """Frame coordinates and derivatives 0..3 on ``ticks`` equal steps per frame.
 
-        Frame i is sample ``i * ticks``, exactly at its solution.
+        Frame i is sample ``i * ticks``, exactly at its solution. Every frame interval has
+        the same local coordinates, so this is one matrix product.
         """
+        n, m = self.n, self.coef.shape[2]
         tau = np.arange(ticks, dtype=np.float64) / ticks
         k = np.arange(DEGREE + 1)
-        x = uniform_x(self.n, ticks)
-        out: list[Array] = []
-        for d in range(4):
-            fac = np.array([math.perm(int(kk), d) for kk in k], dtype=np.float64)
-            basis = np.where(k >= d, fac * tau[:, None] ** np.maximum(k - d, 0), 0.0)
-            inner = np.einsum("tk,ika->ita", basis, self.coef).reshape(-1, self.coef.shape[2])
-            end = np.einsum("k,ka->a", fac, self.coef[-1])[None, :]  # tau = 1, last piece
-            out.append(np.concatenate([inner, end]))
+        fac = np.array([[math.perm(int(kk), d) for kk in k] for d in range(4)], dtype=np.float64)
+        powers = tau[:, None] ** np.maximum(k[None, :] - np.arange(4)[:, None, None], 0)
+        basis = np.where(k >= np.arange(4)[:, None, None], fac[:, None, :] * powers, 0.0)
+        end = fac @ self.coef[-1]  # tau = 1 on the last piece, (4, 8)
+        out = [np.concatenate([np.matmul(basis[d], self.coef).reshape(-1, m), end[d : d + 1]])
+               for d in range(4)]
         out[0][::ticks] = self.q_frames
-        return x, out
+        return uniform_x(n, ticks), out
 
     def knot_jerk_from_left(self) -> Array:
         """Third x-derivative at each knot 1..n-1 from the piece before it, (n - 1, 8).
@@ -189,9 +189,8 @@ class FramePath:
 
     def timed_grid(self, ticks: int, xd: float) -> tuple[Array, Samples]:
         """Samples at constant path speed ``xd`` [frames/s] on ``ticks`` steps per frame."""
-        x, p = self.on_grid(ticks)
-        ones = np.full(x.size, xd)
-        return x, _timed(p, ones, np.zeros_like(x))
+        x, (p0, p1, p2, p3) = self.on_grid(ticks)
+        return x, Samples(q=p0, qd=p1 * xd, qdd=p2 * xd**2, qddd=p3 * xd**3)
 
 
 def _timed(p: list[Array], xd: Array, xdd: Array, *, jerk_by_difference: bool = False,
@@ -250,7 +249,6 @@ def _overshooting_knots(
     derivative). Pieces with a frame outside the range are left to the limit checks.
     """
     n, m = y.shape
-    coef = hermite_coefficients(y, v, w)
     pts = np.stack([y[:-1], y[:-1] + v[:-1] / 5.0, y[:-1] + 0.4 * v[:-1] + w[:-1] / 20.0,
                     y[1:] - 0.4 * v[1:] + w[1:] / 20.0, y[1:] - v[1:] / 5.0, y[1:]])
     ends_inside = ((pts[0] >= lower) & (pts[0] <= upper) & (pts[5] >= lower)
@@ -258,7 +256,8 @@ def _overshooting_knots(
     maybe = ~still & ends_inside & ((pts.max(axis=0) > upper) | (pts.min(axis=0) < lower))
     out = np.zeros((n, m), dtype=bool)
     for i, j in zip(*np.nonzero(maybe), strict=True):
-        c = coef[i, :, j]
+        c = hermite_coefficients(y[i : i + 2, j : j + 1], v[i : i + 2, j : j + 1],
+                                 w[i : i + 2, j : j + 1])[0, :, 0]
         deriv = np.arange(1, DEGREE + 1) * c[1:]  # increasing powers
         roots = np.roots(deriv[::-1]) if np.any(deriv[1:] != 0.0) else np.zeros(0)
         tau = roots.real[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < 1)]

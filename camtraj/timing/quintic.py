@@ -138,20 +138,12 @@ def _inv(a: Array) -> Array:
 
 def _mul(a: Array, b: Array) -> Array:
     """Products of 2x2 matrices ``a[r, c, ...]`` with matrices ``b[r, c, ...]`` or vectors
-    ``b[r, ...]``, element by element (numpy's matmul is slow on 2x2 blocks)."""
-    out = np.empty(np.broadcast_shapes(a.shape[:2] + b.shape[b.ndim - a.ndim + 2:]
-                                       if b.ndim == a.ndim else (2, *a.shape[2:]),
-                                       (2,) * (b.ndim - a.ndim + 2) + a.shape[2:]))
+    ``b[r, ...]`` (einsum with the block index first is fast; matmul on 2x2 blocks is not)."""
     if b.ndim == a.ndim:
-        for r in range(2):
-            for c in range(2):
-                np.multiply(a[r, 0], b[0, c], out=out[r, c])
-                out[r, c] += a[r, 1] * b[1, c]
+        out: Array = np.einsum("ij...,jk...->ik...", a, b)
         return out
-    for r in range(2):
-        np.multiply(a[r, 0], b[0], out=out[r])
-        out[r] += a[r, 1] * b[1]
-    return out
+    vec: Array = np.einsum("ij...,j...->i...", a, b)
+    return vec
 
 
 def _pad(a: Array, size: int, *, front: bool, fill: Array | None = None) -> Array:
