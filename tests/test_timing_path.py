@@ -214,3 +214,28 @@ def test_a_frame_beyond_a_limit_is_still_reported(limits: Limits) -> None:
     q[18, EXTEND] = 1.5 + 1e-3
     with pytest.raises(TimingLimitError, match=r"extend position 1\.5 m is beyond its upper"):
         time_shot(q, t, limits, mode="scale")
+
+
+# ---------------------------------------------------------------------------------------------
+# Run-up and run-out extents
+# ---------------------------------------------------------------------------------------------
+
+
+def test_stop_move_range_is_exact(limits: Limits) -> None:
+    from camtraj.timing.edges import _StopMove
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        v = rng.uniform(-1.0, 1.0, 8) * limits.velocity
+        a = rng.uniform(-1.0, 1.0, 8) * limits.acceleration
+        move = _StopMove(rng.uniform(-1.0, 1.0, 8), v, a, limits)
+        # ruckig's own evaluation on a dense grid: inside the computed range, and reaching
+        # it to within what the grid can resolve (an extreme inside a step is where the
+        # velocity is zero, so the nearest sample is within a_max * step² / 2 of it).
+        t = np.linspace(0.0, move.duration, 4001)
+        pos, _, _, _ = move.sample(t)
+        step = move.duration / 4000
+        assert np.all(pos >= move.min - 1e-12) and np.all(pos <= move.max + 1e-12)
+        tol = 0.5 * limits.acceleration * step**2 + 1e-12
+        assert np.all(pos.min(axis=0) - move.min <= tol)
+        assert np.all(move.max - pos.max(axis=0) <= tol)
