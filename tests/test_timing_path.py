@@ -239,3 +239,22 @@ def test_stop_move_range_is_exact(limits: Limits) -> None:
         tol = 0.5 * limits.acceleration * step**2 + 1e-12
         assert np.all(pos.min(axis=0) - move.min <= tol)
         assert np.all(move.max - pos.max(axis=0) <= tol)
+
+
+def test_a_shot_ending_at_full_speed_while_accelerating_is_slowed_for_its_run_out(
+    limits: Limits,
+) -> None:
+    # The track accelerates at 1.5 m/s² right up to the last frame, reaching 1.95 m/s of
+    # its 2 m/s: every frame fits, but no jerk-limited stop from there stays under 2 m/s.
+    n = 49
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = 3.0 + (1.95 - 1.5 * t[-1]) * t + 0.75 * t**2
+    with pytest.raises(TimingLimitError, match=r"run-out from frame 48 would need track "
+                       r"velocity 2\.0\d m/s, beyond 2 m/s.*try --timing scale"):
+        time_shot(q, t, limits)
+    take = time_shot(q, t, limits, mode="scale")
+    assert take.speed_factor > 1.0
+    assert np.all(np.abs(take.qd) <= limits.velocity * (1 + 1e-9))
+    v = divided(take.t, take.q, 1)
+    assert np.max(np.abs(v) / limits.velocity) <= 1 + SLACK

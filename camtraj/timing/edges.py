@@ -112,6 +112,29 @@ class _StopMove:
         return p, v, a, j
 
 
+def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
+    """Per axis, the uniform slow-down the stop from state (v, a) needs to stay within the
+    velocity limit, shape (8,) (<= 1 where it fits as is).
+
+    A jerk-limited stop that starts accelerating away from rest first has to bring the
+    acceleration to zero, gaining ``a² / 2J`` of speed: ``|v| + a² / 2J`` must not exceed
+    the limit (ruckig's velocity interface does not keep it). Slowed by ``s`` the state is
+    (v / s, a / s²); the smallest such ``s`` is found by bisection (the need falls with s).
+    For the run-up pass the reversed state (-v, a).
+    """
+    gain = np.where(v * a > 0.0, a * a / (2.0 * limits.jerk), 0.0)
+    speed = np.abs(v)
+    lo = np.zeros(N_AXES)
+    hi = np.maximum(1.0, (speed + gain) / limits.velocity) + 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        fits = speed / mid + gain / mid**4 <= limits.velocity
+        hi = np.where(fits, mid, hi)
+        lo = np.where(fits, lo, mid)
+    out: Array = hi
+    return out
+
+
 def _phase_range(profile: Any) -> tuple[float, float]:
     """Lowest and highest position of one axis's ruckig profile.
 

@@ -13,13 +13,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.timing.edges import runout, runup
+from camtraj.timing.edges import runout, runup, stop_slowdown
 from camtraj.timing.limits import (
     LIMIT_RTOL,
     N_AXES,
     FrameMap,
     Limits,
     LimitViolation,
+    TimingLimitError,
+    fmt,
     peak_use,
     shot_error,
     slowdown,
@@ -179,13 +181,16 @@ def time_shot(
     # The shot's own timing, sampled at the servo rate: limits, max speed.
     ticks0 = max(1, round(rate * dt))
     rt_x, rt, rt_checked, rt_checked_x = _grid_samples(path, ticks0, fps)
-    need = slowdown(rt_checked, limits)
+    edge_need = _edge_slowdown(rt, limits)
+    need = max(slowdown(rt_checked, limits), float(edge_need.max()))
     max_speed = 1.0 / need if need > 0 else math.inf
     limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
     position_bad = [v for v in limiting if v.quantity == "position"]
 
     if mode == "shot" and limiting:
         raise shot_error(limiting, max_speed, fps)
+    if mode == "shot" and edge_need.max() > 1.0 + LIMIT_RTOL:
+        raise _edge_error(rt, edge_need, limits, frames, max_speed, fps)
     if position_bad:
         raise shot_error(position_bad, max_speed, fps)
 
@@ -358,6 +363,32 @@ def _grid_samples(path: FramePath, ticks: int, speed: float) -> tuple[Array, Sam
     return x, stream, checked, checked_x
 
 
+def _edge_slowdown(s: Samples, limits: Limits) -> Array:
+    """The slow-down the run-up (row 0) and run-out (row 1) need for velocity, (2, 8)."""
+    return np.stack([stop_slowdown(-s.qd[0], s.qdd[0], limits),
+                     stop_slowdown(s.qd[-1], s.qdd[-1], limits)])
+
+
+def _edge_error(s: Samples, need: Array, limits: Limits, frames: IntArray, max_speed: float,
+                fps: float) -> TimingLimitError:
+    side, j = (int(i) for i in np.unravel_index(int(np.argmax(need)), need.shape))
+    k = 0 if side == 0 else -1
+    v, a = float(s.qd[k, j]), float(s.qdd[k, j])
+    peak = abs(v) + a * a / (2.0 * float(limits.jerk[j]))
+    revolute = bool(limits.revolute[j])
+    what = (f"the run-up into frame {frames[0]}" if side == 0
+            else f"the run-out from frame {frames[-1]}")
+    pct = math.floor(max_speed * 100.0)
+    limit = fmt(float(limits.velocity[j]), "velocity", revolute)
+    msg = (
+        f"{what} would need {limits.names[j]} velocity "
+        f"{fmt(peak, 'velocity', revolute)}, beyond {limit}"
+        f" (the shot {'starts' if side == 0 else 'ends'} still accelerating near that speed)"
+        f"; the move fits at {pct}% speed - try --timing scale"
+    )
+    return TimingLimitError(msg, max_speed=max_speed, feasible_fps=fps * max_speed)
+
+
 def _scale(
     path: FramePath, dt: float, rate: float, limits: Limits, factor: float
 ) -> tuple[float, int, Samples, Array]:
@@ -372,7 +403,7 @@ def _scale(
     for _ in range(20):
         ticks = max(1, round(rate * s * dt))
         x, samples, checked, _ = _grid_samples(path, ticks, 1.0 / (s * dt))
-        k = slowdown(checked, limits)
+        k = max(slowdown(checked, limits), float(_edge_slowdown(samples, limits).max()))
         if k <= 1.0 + LIMIT_RTOL:
             return s, ticks, samples, x
         s *= k * (1.0 + 1e-12)
