@@ -131,7 +131,7 @@ def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
         fits = speed / mid + gain / mid**4 <= limits.velocity
         hi = np.where(fits, mid, hi)
         lo = np.where(fits, lo, mid)
-    out: Array = hi
+    out: Array = np.where(speed + gain > 0.0, hi, 0.0)
     return out
 
 
