@@ -170,7 +170,8 @@ def time_shot(
     Raises:
         ValueError: Bad shapes, non-finite values, non-increasing or non-uniform times, an
             unknown mode or a non-positive rate.
-        TimingLimitError: A limit is exceeded (``"shot"`` mode), a position limit is crossed
+        TimingLimitError: A limit is exceeded (``"shot"`` mode, including a run-up or
+            run-out that could not stay under a velocity limit), a position limit is crossed
             (every mode, including by the run-up or run-out), or the retime fails.
     """
     q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate)
