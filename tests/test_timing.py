@@ -13,7 +13,6 @@ Facts used:
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -469,22 +468,18 @@ def test_all_still_shot_is_a_plain_hold(limits: Limits) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Speed
+# A long shot (its speed is measured by bench/run.py, not here: no timed tests)
 # ---------------------------------------------------------------------------------------------
 
 
-def test_a_minute_long_shot_is_fast(limits: Limits) -> None:
+def test_a_minute_long_shot_in_every_mode(limits: Limits) -> None:
     n = 1440
     t = frame_times(n)
     periods = np.array([20.0, 15.0, 12.0, 17.0, 11.0, 9.0, 7.0, 13.0])
     amp = np.array([3.0, 0.8, 0.3, 0.3, 0.5, 0.5, 0.4, 0.2])
     q = HOME + amp * np.sin(2 * np.pi * t[:, None] / periods)
-    time_shot(q[:50], t[:50], limits, mode="optimal")  # warm up the lazy imports
-    budget = {"shot": 0.3, "scale": 0.3, "optimal": 2.0}
-    for mode, limit in budget.items():
-        start = time.perf_counter()
+    for mode in ("shot", "scale", "optimal"):
         take = time_shot(q, t, limits, mode=mode)
-        elapsed = time.perf_counter() - start
-        assert np.all(np.isfinite(take.q))
-        # Three times the target, so a busy test machine does not fail it.
-        assert elapsed < 3 * limit, f"{mode}: {elapsed:.2f} s"
+        assert_passes_frames(take, q)
+        assert_rest_to_rest(take)
+        assert_within_limits_by_differences(take, limits, jerk=mode != "optimal")
