@@ -13,7 +13,6 @@ Facts used:
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -157,18 +156,20 @@ def test_shot_sinusoid_matches_analytic_derivatives(limits: Limits) -> None:
 
     a, b = take.frame_samples[0], take.frame_samples[-1] + 1
     ts = take.t[a:b] - take.shot_start
-    # Interior (a second away from the free ends, whose derivatives are estimated from six
-    # frames): the quintic spline is accurate to O((omega*h)^(6-k)) for the k-th derivative,
-    # far below these bounds.
+    # Interior (a second away from the free ends): the quintic spline is accurate to
+    # O((omega*h)^(6-k)) for the k-th derivative, far below these bounds. At the free ends
+    # the spline follows a least-squares cubic's jerk and zero snap, so it reproduces cubics,
+    # not the sinusoid's snap: there its k-th derivative is off by O((omega*h)^(4-k)).
     inner = (ts > 1.0) & (ts < 9.0)
-    for k, (got, tol) in enumerate(
-        ((take.q, 1e-9), (take.qd, 1e-8), (take.qdd, 1e-6), (take.qddd, 1e-4))
+    for k, (got, tol, tol_end) in enumerate(
+        ((take.q, 1e-9, 1e-5), (take.qd, 1e-8, 1e-3), (take.qdd, 1e-6, 1e-2),
+         (take.qddd, 1e-4, 1e-1))
     ):
         offset = HOME if k == 0 else 0.0
         ref = offset + amp * omega**k * np.sin(omega * ts[:, None] + k * np.pi / 2)
         err = np.abs(got[a:b] - ref) / (amp * omega**k)
         assert err[inner].max() < tol, f"derivative {k}"
-        assert err.max() < 1e3 * tol, f"derivative {k} near the ends"
+        assert err.max() < tol_end, f"derivative {k} near the ends"
 
     rep = take.report
     # Peak use over the shot: the analytic peaks over the limits.
@@ -318,9 +319,12 @@ def test_scale_factor_each_quantity(limits: Limits, binding: str) -> None:
                    (amp * omega**3 / jmax) ** (1 / 3))
     assert analytic == pytest.approx(want)
     take = time_shot(q, t, limits, mode="scale")
-    # The peaks are measured at the servo samples (not the continuous maximum), and away
-    # from the free ends the spline is exact to ~1e-6 for jerk at omega=30: 1e-3 is ample.
-    assert take.speed_factor == pytest.approx(analytic, rel=1e-3)
+    # The peaks are measured at the servo samples (not the continuous maximum). Away from
+    # the free ends the spline is exact to ~1e-6 for jerk at omega=30; at a free end it
+    # follows a least-squares cubic (zero snap), whose acceleration at these 50 frames per
+    # period can exceed the sinusoid's peak by up to 1.5 % (0.7 % on the factor).
+    assert take.speed_factor == pytest.approx(analytic, rel=1e-2)
+    assert take.speed_factor >= analytic * (1 - 1e-3)  # never faster than the limits allow
     assert_passes_frames(take, q)
     assert_rest_to_rest(take)
     assert_within_limits_by_differences(take, limits, jerk=True)
@@ -464,22 +468,18 @@ def test_all_still_shot_is_a_plain_hold(limits: Limits) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Speed
+# A long shot (its speed is measured by bench/run.py, not here: no timed tests)
 # ---------------------------------------------------------------------------------------------
 
 
-def test_a_minute_long_shot_is_fast(limits: Limits) -> None:
+def test_a_minute_long_shot_in_every_mode(limits: Limits) -> None:
     n = 1440
     t = frame_times(n)
     periods = np.array([20.0, 15.0, 12.0, 17.0, 11.0, 9.0, 7.0, 13.0])
     amp = np.array([3.0, 0.8, 0.3, 0.3, 0.5, 0.5, 0.4, 0.2])
     q = HOME + amp * np.sin(2 * np.pi * t[:, None] / periods)
-    time_shot(q[:50], t[:50], limits, mode="optimal")  # warm up the lazy imports
-    budget = {"shot": 0.3, "scale": 0.3, "optimal": 2.0}
-    for mode, limit in budget.items():
-        start = time.perf_counter()
+    for mode in ("shot", "scale", "optimal"):
         take = time_shot(q, t, limits, mode=mode)
-        elapsed = time.perf_counter() - start
-        assert np.all(np.isfinite(take.q))
-        # Three times the target, so a busy test machine does not fail it.
-        assert elapsed < 3 * limit, f"{mode}: {elapsed:.2f} s"
+        assert_passes_frames(take, q)
+        assert_rest_to_rest(take)
+        assert_within_limits_by_differences(take, limits, jerk=mode != "optimal")

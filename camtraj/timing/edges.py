@@ -1,0 +1,272 @@
+"""Run-up and run-out: jerk-limited ruckig moves from rest into the first frame's state and
+from the last frame's state to rest.
+
+Only ruckig's offline state-to-state calculation is used (no control cycle, no intermediate
+waypoints - those call a remote service). Units: SI (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.timing.limits import LIMIT_RTOL, N_AXES, Limits, TimingLimitError, fmt
+
+Array = NDArray[np.float64]
+
+#: A boundary state within this fraction of the velocity and acceleration limits is at rest.
+REST_RTOL = 1e-9
+_JERK_STEP = 1e-6  # [s] step of the one-sided difference that reads jerk off a ruckig move
+
+
+@dataclass(frozen=True, eq=False)
+class Edge:
+    """Samples of a run-up or run-out (each (k, 8)) and its report."""
+
+    q: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+    report: dict[str, Any]
+    warnings: list[str]
+
+
+class _StopMove:
+    """A ruckig move from a state to rest, per axis time-optimal (no synchronisation).
+
+    Velocity control interface: the target is zero velocity and acceleration, the stop
+    position is whatever the jerk-limited braking reaches. Each axis brakes as hard as its
+    limits allow, which is also the shortest braking distance. Only ruckig's state-to-state
+    calculation is used (offline: no control cycle, no intermediate waypoints - those call a
+    remote service).
+    """
+
+    def __init__(self, p: Array, v: Array, a: Array, limits: Limits) -> None:
+        from ruckig import (
+            ControlInterface,
+            InputParameter,
+            Result,
+            Ruckig,
+            Synchronization,
+            Trajectory,
+        )
+
+        inp = InputParameter(N_AXES)
+        inp.control_interface = ControlInterface.Velocity
+        inp.synchronization = Synchronization.No
+        inp.current_position = [float(x) for x in p]
+        inp.current_velocity = [float(x) for x in v]
+        inp.current_acceleration = [float(x) for x in a]
+        inp.target_position = [float(x) for x in p]
+        inp.target_velocity = [0.0] * N_AXES
+        inp.target_acceleration = [0.0] * N_AXES
+        inp.max_velocity = [float(x) for x in limits.velocity]
+        inp.max_acceleration = [float(x) for x in limits.acceleration]
+        inp.max_jerk = [float(x) for x in limits.jerk]
+        traj = Trajectory(N_AXES)
+        try:
+            result = Ruckig(N_AXES).calculate(inp, traj)
+        except RuntimeError as exc:  # ruckig raises on invalid input
+            msg = f"ruckig could not plan a stop from the shot's boundary state: {exc}"
+            raise TimingLimitError(msg) from exc
+        if result not in (Result.Working, Result.Finished):
+            msg = f"ruckig could not plan a stop from the shot's boundary state ({result})"
+            raise TimingLimitError(msg)
+        self._traj = traj
+        self.duration = float(traj.duration)
+        end = traj.at_time(self.duration)
+        self.rest_position = np.array(end[0], dtype=np.float64)
+        # Position range of the move, exactly, from ruckig's per-axis phases (its own
+        # position_extrema is not reliable with the velocity interface).
+        ranges = np.array([_phase_range(prof) for prof in traj.profiles[0]])
+        self.min = np.minimum(ranges[:, 0], self.rest_position)
+        self.max = np.maximum(ranges[:, 1], self.rest_position)
+
+    def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
+        """Position, velocity, acceleration and jerk at move times, each (k, 8).
+
+        At and after the end of the move the state is exactly rest at the stop position.
+        Jerk is read as a short one-sided difference of the acceleration (ruckig's jerk is
+        piecewise constant; the difference is a mean of it, so never beyond the limit).
+        """
+        k = times.size
+        p = np.empty((k, N_AXES))
+        v = np.zeros((k, N_AXES))
+        a = np.zeros((k, N_AXES))
+        j = np.zeros((k, N_AXES))
+        at = self._traj.at_time
+        for i, tm in enumerate(times.tolist()):
+            if tm >= self.duration:
+                p[i] = self.rest_position
+                continue
+            tm = max(tm, 0.0)
+            pi, vi, ai = at(tm)
+            p[i], v[i], a[i] = pi, vi, ai
+            t2 = min(tm + _JERK_STEP, self.duration)
+            if t2 > tm:
+                j[i] = (np.array(at(t2)[2]) - a[i]) / (t2 - tm)
+        return p, v, a, j
+
+
+def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
+    """Per axis, the uniform slow-down the stop from state (v, a) needs to stay within the
+    velocity limit, shape (8,) (<= 1 where it fits as is).
+
+    A jerk-limited stop that starts accelerating away from rest first has to bring the
+    acceleration to zero, gaining ``a² / 2J`` of speed: ``|v| + a² / 2J`` must not exceed
+    the limit (ruckig's velocity interface does not keep it). Slowed by ``s`` the state is
+    (v / s, a / s²); the smallest such ``s`` is found by bisection (the need falls with s).
+    For the run-up pass the reversed state (-v, a).
+    """
+    gain = np.where(v * a > 0.0, a * a / (2.0 * limits.jerk), 0.0)
+    speed = np.abs(v)
+    lo = np.zeros(N_AXES)
+    hi = np.maximum(1.0, (speed + gain) / limits.velocity) + 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        fits = speed / mid + gain / mid**4 <= limits.velocity
+        hi = np.where(fits, mid, hi)
+        lo = np.where(fits, lo, mid)
+    out: Array = np.where(speed + gain > 0.0, hi, 0.0)
+    return out
+
+
+def _phase_range(profile: Any) -> tuple[float, float]:
+    """Lowest and highest position of one axis's ruckig profile.
+
+    A profile is an optional two-phase brake followed by seven phases, each of constant
+    jerk; inside a phase the position is a cubic whose extrema are where the velocity (a
+    quadratic) is zero.
+    """
+    starts = [(profile.brake.p[i], profile.brake.v[i], profile.brake.a[i],
+               profile.brake.j[i], profile.brake.t[i]) for i in range(2)]
+    starts += [(profile.p[i], profile.v[i], profile.a[i], profile.j[i], profile.t[i])
+               for i in range(7)]
+    lo, hi = math.inf, -math.inf
+    for p0, v0, a0, j, dur in starts:
+        if dur <= 0.0:
+            continue
+        cands = [0.0, dur]
+        # roots of v0 + a0 t + j t^2 / 2 inside the phase
+        if j != 0.0:
+            disc = a0 * a0 - 2.0 * j * v0
+            if disc >= 0.0:
+                r = math.sqrt(disc)
+                cands += [(-a0 + r) / j, (-a0 - r) / j]
+        elif a0 != 0.0:
+            cands.append(-v0 / a0)
+        for t in cands:
+            if 0.0 <= t <= dur:
+                pos = p0 + t * (v0 + t * (a0 / 2.0 + t * j / 6.0))
+                lo, hi = min(lo, pos), max(hi, pos)
+    return lo, hi
+
+
+def _at_rest(v: Array, a: Array, limits: Limits) -> bool:
+    return bool(np.all(np.abs(v) <= REST_RTOL * limits.velocity)
+                and np.all(np.abs(a) <= REST_RTOL * limits.acceleration))
+
+
+def _empty_edge(p: Array, limits: Limits, key: str) -> Edge:
+    empty = np.zeros((0, N_AXES))
+    report = {
+        "duration": 0.0, "hold": 0.0, "samples": 0,
+        key: {name: float(p[j]) for j, name in enumerate(limits.names)},
+        "travel": dict.fromkeys(limits.names, 0.0),
+        "extent": dict.fromkeys(limits.names, 0.0),
+    }
+    return Edge(empty, empty, empty, empty, report, [])
+
+
+def _edge_report(
+    move: _StopMove, ticks: int, step: float, p: Array, limits: Limits, key: str, sign: float
+) -> dict[str, Any]:
+    rest = move.rest_position
+    return {
+        "duration": move.duration,
+        "hold": max(0.0, ticks * step - move.duration),
+        "samples": ticks,
+        key: {name: float(rest[j]) for j, name in enumerate(limits.names)},
+        "travel": {name: float(sign * (p[j] - rest[j])) for j, name in enumerate(limits.names)},
+        "extent": {name: float(move.max[j] - move.min[j]) for j, name in enumerate(limits.names)},
+    }
+
+
+def _edge_position_check(move: _StopMove, limits: Limits, what: str, frame: int) -> None:
+    tol = LIMIT_RTOL * (limits.upper - limits.lower)
+    over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
+    if over.size == 0:
+        return
+    revolute = limits.revolute
+    parts = []
+    for j in over.tolist():
+        beyond_upper = move.max[j] > limits.upper[j]
+        value = move.max[j] if beyond_upper else move.min[j]
+        bound = limits.upper[j] if beyond_upper else limits.lower[j]
+        parts.append(
+            f"{limits.names[j]} goes to {fmt(float(value), 'position', bool(revolute[j]))}, "
+            f"beyond its {'upper' if beyond_upper else 'lower'} limit "
+            f"{fmt(float(bound), 'position', bool(revolute[j]))}"
+        )
+    msg = (
+        f"the {what} {'into' if what == 'run-up' else 'from'} frame {frame} "
+        f"({move.duration:.2f} s) needs more room: " + "; ".join(parts)
+        + "; move the shot away from the limit or slow it down at that end"
+    )
+    raise TimingLimitError(msg)
+
+
+def runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> Edge:
+    """A jerk-limited move from rest into the first frame's state (p, v, a).
+
+    Built as the time reversal of the stop from the reversed state (p, -v, a): that stop ends
+    at rest at the start position, and played backwards it starts at rest there and arrives
+    exactly (bit for bit) at the first frame's state. Each axis uses its shortest braking
+    distance, so this is the least room a run-up can need. Velocity, acceleration and jerk
+    limits are symmetric, so the reversed move is inside them. The move starts on a servo
+    tick (held at rest before it) so that the first frame lands on a tick.
+    """
+    if _at_rest(v, a, limits):
+        return _empty_edge(p, limits, "start")
+    move = _StopMove(p, -v, a, limits)
+    _edge_position_check(move, limits, "run-up", frame)
+    ticks = max(1, math.ceil(move.duration / step - 1e-9))
+    # Sample k (0..ticks-1) is at run-up time k*step - hold; reversed time = duration - that.
+    hold = ticks * step - move.duration
+    reverse_t = move.duration - (np.arange(ticks, dtype=np.float64) * step - hold)
+    reverse_t[0] = max(reverse_t[0], move.duration)  # exactly at rest (hold may be -1e-9 step)
+    pos, vel, acc, jerk = move.sample(reverse_t)
+    report = _edge_report(move, ticks, step, p, limits, "start", 1.0)
+    return Edge(pos, -vel, acc, -jerk, report, _edge_warnings(report, limits, "run-up"))
+
+
+def runout(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> Edge:
+    """A jerk-limited stop from the last frame's state; the take ends at rest on a tick."""
+    if _at_rest(v, a, limits):
+        return _empty_edge(p, limits, "end")
+    move = _StopMove(p, v, a, limits)
+    _edge_position_check(move, limits, "run-out", frame)
+    ticks = max(1, math.ceil(move.duration / step - 1e-9))
+    times = np.arange(1, ticks + 1, dtype=np.float64) * step
+    times[-1] = max(times[-1], move.duration)  # the take ends exactly at rest
+    pos, vel, acc, jerk = move.sample(times)
+    report = _edge_report(move, ticks, step, p, limits, "end", -1.0)
+    return Edge(pos, vel, acc, jerk, report, _edge_warnings(report, limits, "run-out"))
+
+
+def _edge_warnings(report: dict[str, Any], limits: Limits, what: str) -> list[str]:
+    """A note when a run-up or run-out travels more than a tenth of an axis's range."""
+    out = []
+    span = limits.upper - limits.lower
+    for j, name in enumerate(limits.names):
+        ext = float(report["extent"][name])
+        if ext > 0.1 * span[j]:
+            out.append(
+                f"the {what} moves {name} by {fmt(ext, 'position', bool(limits.revolute[j]))}"
+                f" ({ext / span[j]:.0%} of its range) over {report['duration']:.2f} s"
+            )
+    return out

@@ -1,0 +1,338 @@
+"""Limits of the robot's axes and the checks of a sampled stream against them.
+
+Units: SI throughout (m, rad, s); messages show revolute axes in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.errors import LimitError
+from camtraj.robot import JOINT_KINDS, JOINT_NAMES
+from camtraj.timing.path import Samples, runs
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
+N_AXES = 8
+#: Relative tolerance of the limit checks in "shot" and "scale" modes (float round-off only).
+LIMIT_RTOL = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """Per-axis limits, every array of shape (8,) in joint order, SI units.
+
+    Attributes:
+        lower: Lower position limits [m or rad].
+        upper: Upper position limits [m or rad].
+        velocity: Velocity limits (symmetric) [m/s or rad/s].
+        acceleration: Acceleration limits (symmetric) [m/s² or rad/s²].
+        jerk: Jerk limits (symmetric) [m/s³ or rad/s³].
+        names: Axis names, in joint order.
+        kinds: ``"prismatic"`` or ``"revolute"`` per axis (messages show revolute axes in deg).
+    """
+
+    lower: Array
+    upper: Array
+    velocity: Array
+    acceleration: Array
+    jerk: Array
+    names: tuple[str, ...] = JOINT_NAMES
+    kinds: tuple[str, ...] = JOINT_KINDS
+
+    def __post_init__(self) -> None:
+        for name in ("lower", "upper", "velocity", "acceleration", "jerk"):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            if arr.shape != (N_AXES,) or not np.all(np.isfinite(arr)):
+                msg = f"limits.{name} must be {N_AXES} finite numbers, got shape {arr.shape}"
+                raise ValueError(msg)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        for name in ("velocity", "acceleration", "jerk"):
+            if np.any(getattr(self, name) <= 0):
+                msg = f"limits.{name} must be positive"
+                raise ValueError(msg)
+        if np.any(self.lower >= self.upper):
+            msg = "limits.lower must be below limits.upper on every axis"
+            raise ValueError(msg)
+        if len(self.names) != N_AXES or len(self.kinds) != N_AXES:
+            msg = f"limits need {N_AXES} axis names and kinds"
+            raise ValueError(msg)
+        if any(k not in ("prismatic", "revolute") for k in self.kinds):
+            msg = f"limits.kinds must be 'prismatic' or 'revolute', got {self.kinds}"
+            raise ValueError(msg)
+
+    @classmethod
+    def from_robot(cls, robot: Any) -> Limits:
+        """The limits of a :class:`camtraj.robot.Robot` (or anything with the same fields)."""
+        return cls(
+            lower=robot.lower,
+            upper=robot.upper,
+            velocity=robot.max_velocity,
+            acceleration=robot.max_acceleration,
+            jerk=robot.max_jerk,
+            names=tuple(getattr(robot, "joint_names", JOINT_NAMES)),
+            kinds=tuple(getattr(robot, "joint_kinds", JOINT_KINDS)),
+        )
+
+    @property
+    def revolute(self) -> BoolArray:
+        """Whether each axis is revolute, shape (8,)."""
+        return np.array([k == "revolute" for k in self.kinds])
+
+    def bound(self, quantity: str) -> Array:
+        """The symmetric limit of ``"velocity"``, ``"acceleration"`` or ``"jerk"``, shape (8,)."""
+        return {"velocity": self.velocity, "acceleration": self.acceleration,
+                "jerk": self.jerk}[quantity]
+
+
+@dataclass(frozen=True)
+class LimitViolation:
+    """One axis exceeding one limit.
+
+    Attributes:
+        axis: Axis name.
+        quantity: ``"position"``, ``"velocity"``, ``"acceleration"`` or ``"jerk"``.
+        peak: The worst value [SI: m, rad, per s, s², s³], signed.
+        limit: The limit it is compared with [SI]: the position bound it crosses, or the
+            (positive) velocity / acceleration / jerk limit.
+        ratio: For velocity, acceleration and jerk ``|peak| / limit``; for position the
+            position use (see :attr:`TimingReport.peak_use`). Above 1 means exceeded.
+        frames: Runs of consecutive frames ``(first, last)`` (inclusive, film frame numbers)
+            where the limit is exceeded. A servo sample between two frames counts for both.
+        revolute: Whether the axis is revolute (for display in degrees).
+    """
+
+    axis: str
+    quantity: str
+    peak: float
+    limit: float
+    ratio: float
+    frames: tuple[tuple[int, int], ...]
+    revolute: bool
+
+    @property
+    def speed_needed(self) -> float:
+        """The slow-down factor that makes this limit fit (inf for position)."""
+        if self.quantity == "velocity":
+            return self.ratio
+        if self.quantity == "acceleration":
+            return math.sqrt(self.ratio)
+        if self.quantity == "jerk":
+            return math.pow(self.ratio, 1.0 / 3.0)
+        return math.inf
+
+    @property
+    def frame_text(self) -> str:
+        """The frames as text, e.g. ``"frames 12-19, 40"``."""
+        return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in self.frames)
+
+    def describe(self) -> str:
+        """One line for people: ``rotate velocity 143 deg/s exceeds 90.0 deg/s on frames 1-9``."""
+        peak = fmt(self.peak, self.quantity, self.revolute)
+        if self.quantity == "position":
+            side = "upper" if self.peak > self.limit else "lower"
+            lim = fmt(self.limit, self.quantity, self.revolute)
+            return (
+                f"{self.axis} position {peak} is beyond its {side} limit {lim} "
+                f"on {self.frame_text}"
+            )
+        lim = fmt(self.limit, self.quantity, self.revolute)
+        peak = fmt(abs(self.peak), self.quantity, self.revolute)
+        return f"{self.axis} {self.quantity} {peak} exceeds {lim} on {self.frame_text}"
+
+
+class TimingLimitError(LimitError):
+    """The shot cannot be timed inside the limits.
+
+    Attributes:
+        violations: The limits exceeded, worst first.
+        max_speed: See :attr:`TimingReport.max_speed` (nan when not known).
+        feasible_fps: See :attr:`TimingReport.feasible_fps` (nan when not known).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        violations: list[LimitViolation] | None = None,
+        max_speed: float = math.nan,
+        feasible_fps: float = math.nan,
+    ) -> None:
+        super().__init__(message)
+        self.violations = violations or []
+        self.max_speed = max_speed
+        self.feasible_fps = feasible_fps
+
+
+@dataclass(frozen=True, eq=False)
+class FrameMap:
+    """Which film frames each sample belongs to.
+
+    ``lo[k]``, ``hi[k]``: frame indices (0..n-1) of sample k: the same frame on a frame,
+    the two neighbours between frames. ``numbers``: film frame number of each index.
+    """
+
+    lo: IntArray
+    hi: IntArray
+    numbers: IntArray
+
+    @classmethod
+    def of(cls, x: Array, numbers: IntArray) -> FrameMap:
+        n = numbers.size
+        lo = np.clip(np.floor(x).astype(np.int64), 0, n - 1)
+        hi = np.where(x > lo, np.minimum(lo + 1, n - 1), lo)
+        return cls(lo=lo, hi=hi, numbers=numbers)
+
+    def spans(self, samples: IntArray) -> tuple[tuple[int, int], ...]:
+        """Inclusive runs ``(first, last)`` of film frame numbers touched by the samples."""
+        touched = np.zeros(self.numbers.size, dtype=bool)
+        touched[self.lo[samples]] = True
+        touched[self.hi[samples]] = True
+        return tuple(
+            (int(self.numbers[a]), int(self.numbers[b - 1])) for a, b in runs(touched)
+        )
+
+
+def position_use(q: Array, limits: Limits) -> Array:
+    """``|q - mid| / half_range`` per axis: 0 in the middle of the range, 1 on a limit."""
+    mid = 0.5 * (limits.upper + limits.lower)
+    half = 0.5 * (limits.upper - limits.lower)
+    use: Array = np.abs(q - mid) / half
+    return use
+
+
+@dataclass(frozen=True, eq=False)
+class Peaks:
+    """Per-axis extremes of a set of samples, each (8,): the lowest and highest position and
+    the largest velocity, acceleration and jerk magnitude."""
+
+    q_min: Array
+    q_max: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+
+    @classmethod
+    def of(cls, s: Samples) -> Peaks:
+        return cls(-_column_max(-s.q), _column_max(s.q), _column_max(np.abs(s.qd)),
+                   _column_max(np.abs(s.qdd)), _column_max(np.abs(s.qddd)))
+
+    def use(self, limits: Limits) -> dict[str, Array]:
+        """Fraction of every limit used, per quantity, each (8,) (see ``position_use``)."""
+        pos = np.maximum(position_use(self.q_min, limits), position_use(self.q_max, limits))
+        return {"position": pos, "velocity": self.qd / limits.velocity,
+                "acceleration": self.qdd / limits.acceleration, "jerk": self.qddd / limits.jerk}
+
+
+def _column_max(a: Array, rows: int = 64) -> Array:
+    """``a.max(axis=0)`` for an (m, k) array, m >= 1, without numpy's slow strided reduce:
+    blocks of ``rows`` rows are reduced as one long row first."""
+    m, k = a.shape
+    cut = m - m % rows
+    parts = [a[cut:].max(axis=0)] if cut < m else []
+    if cut:
+        parts.append(a[:cut].reshape(-1, rows * k).max(axis=0).reshape(rows, k).max(axis=0))
+    out: Array = np.maximum.reduce(parts)
+    return out
+
+
+def slowdown(s: Samples, limits: Limits) -> float:
+    """The smallest uniform slow-down factor that makes velocity, acceleration and jerk fit.
+
+    0 when nothing moves; below 1 when the move could go faster.
+    """
+    if s.q.shape[0] == 0:
+        return 0.0
+    use = Peaks.of(s).use(limits)
+    kv, ka, kj = (float(use[k].max()) for k in ("velocity", "acceleration", "jerk"))
+    return max(kv, math.sqrt(ka), math.pow(kj, 1.0 / 3.0))
+
+
+def violations(
+    s: Samples, limits: Limits, frame_map: FrameMap, rtol: float
+) -> list[LimitViolation]:
+    """Every (axis, quantity) exceeding its limit by more than ``rtol``, worst first."""
+    out: list[LimitViolation] = []
+    revolute = limits.revolute
+    use = Peaks.of(s).use(limits)
+    for j in np.flatnonzero(use["position"] > 1.0 + rtol).tolist():
+        mid = 0.5 * (limits.upper[j] + limits.lower[j])
+        pos_use = np.abs(s.q[:, j] - mid) / (0.5 * (limits.upper[j] - limits.lower[j]))
+        over = np.flatnonzero(pos_use > 1.0 + rtol)
+        k = int(over[np.argmax(pos_use[over])])
+        peak = float(s.q[k, j])
+        bound = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
+        out.append(LimitViolation(
+            axis=limits.names[j], quantity="position", peak=peak, limit=bound,
+            ratio=float(pos_use[k]), frames=frame_map.spans(over), revolute=bool(revolute[j]),
+        ))
+    for quantity, values in (("velocity", s.qd), ("acceleration", s.qdd), ("jerk", s.qddd)):
+        for j in np.flatnonzero(use[quantity] > 1.0 + rtol).tolist():
+            lim = float(limits.bound(quantity)[j])
+            ratio = np.abs(values[:, j]) / lim
+            over = np.flatnonzero(ratio > 1.0 + rtol)
+            k = int(over[np.argmax(ratio[over])])
+            out.append(LimitViolation(
+                axis=limits.names[j], quantity=quantity, peak=float(values[k, j]), limit=lim,
+                ratio=float(ratio[k]), frames=frame_map.spans(over),
+                revolute=bool(revolute[j]),
+            ))
+    out.sort(key=lambda v: (v.quantity != "position", -v.speed_needed if
+                            math.isfinite(v.speed_needed) else -v.ratio))
+    return out
+
+
+def peak_use(
+    s: Samples, limits: Limits
+) -> tuple[dict[str, dict[str, float]], dict[str, tuple[float, float]]]:
+    peaks = Peaks.of(s)
+    use = peaks.use(limits)
+    table = {name: {quantity: float(use[quantity][j]) for quantity in QUANTITIES}
+             for j, name in enumerate(limits.names)}
+    ranges = {name: (float(peaks.q_min[j]), float(peaks.q_max[j]))
+              for j, name in enumerate(limits.names)}
+    return table, ranges
+
+
+def fmt(value: float, quantity: str, revolute: bool) -> str:
+    """A value with its unit: degrees for revolute axes, metres for prismatic ones."""
+    power = QUANTITIES.index(quantity)
+    unit = "deg" if revolute else "m"
+    shown = math.degrees(value) if revolute else value
+    suffix = ["", "/s", "/s^2", "/s^3"][power]
+    mag = abs(shown)
+    if mag >= 100:
+        text = f"{shown:.0f}"
+    elif mag >= 10:
+        text = f"{shown:.1f}"
+    else:
+        text = f"{shown:.3g}"
+    return f"{text} {unit}{suffix}"
+
+
+def shot_error(
+    violations: list[LimitViolation], max_speed: float, fps: float
+) -> TimingLimitError:
+    parts = [v.describe() for v in violations[:4]]
+    if len(violations) > 4:
+        parts.append(f"and {len(violations) - 4} more")
+    msg = "; ".join(parts)
+    if any(v.quantity == "position" for v in violations):
+        msg += "; no retiming can fix a position limit"
+    else:
+        pct = math.floor(max_speed * 100.0)
+        fit_fps = math.floor(fps * max_speed * 10.0) / 10.0
+        msg += f"; the move fits at {pct}% speed ({fit_fps:.1f} fps) - try --timing scale"
+    return TimingLimitError(
+        msg, violations=violations, max_speed=max_speed, feasible_fps=fps * max_speed
+    )
+

@@ -1,0 +1,303 @@
+"""The joint path through the film frames: a quintic spline per axis, in frame units.
+
+Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames i and i+1) is
+``sum_k coef[i, k, :] * (x - i)**k``, k <= 5. How it is built (:meth:`FramePath.fit`):
+
+* **Quintic, C4.** The jerk is checked, so it must be meaningful: a quintic spline has
+  continuous jerk and snap (a cubic's jerk is piecewise constant and jumps at every frame).
+* **Holds stay still.** Previs often holds an axis and then moves it; a global spline would
+  ring into the hold. Every axis is split at its still intervals (consecutive solutions within
+  :data:`HOLD_TOL`): those are straight lines (exactly constant for equal solutions), and every
+  moving stretch is its own spline, clamped to the hold's velocity and zero acceleration.
+* **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
+  beyond the frames. The spline's velocity and acceleration there follow from the frames
+  themselves; only its jerk is set, to that of a least-squares cubic through the end frames,
+  and its snap to zero (:func:`_end_jerk`). This reproduces any cubic motion exactly, and a
+  disturbance of one end frame moves the acceleration and jerk no more than it would in the
+  interior. Setting velocity and acceleration from the interpolating polynomial through the
+  end frames instead (as before) amplified a curvature change near the end about five-fold in
+  jerk, into acceleration and jerk spikes on the last frame intervals.
+* **Never outside the limits.** Where a piece overshoots an axis's position range between
+  frames that are inside it, the velocity and acceleration at its two knots are changed as
+  little as possible to bring the Bezier control points next to them inside (at a knot on
+  the limit: stop there, curve back), those knots are clamped and the rest refitted. A piece
+  lies in the convex hull of its control points, so it then stays inside the range.
+
+The constant coefficient of every piece is the frame solution itself, so the path passes
+exactly (bit for bit) through every frame. Time derivatives are ``d^k q/dx^k * (dx/dt)^k``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.timing.quintic import (
+    DEGREE,
+    hermite_coefficients,
+    solve_knot_derivatives,
+)
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+#: Two consecutive frame solutions closer than this [m or rad] count as "not moving": the path
+#: is a straight line between them (exactly constant when they are equal).
+HOLD_TOL = 1e-9
+#: Frames of the least-squares cubic that gives the jerk at a free end.
+END_FRAMES = 6
+#: Rounds of clamp-and-refit at knots whose pieces could leave the position range; after
+#: these, any knot still out is scaled without a refit (which always certifies).
+_REFIT_ROUNDS = 4
+
+
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """Positions and time derivatives at a set of samples, each (m, 8), SI."""
+
+    q: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+
+    @staticmethod
+    def join(parts: list[Samples]) -> Samples:
+        return Samples(*(np.concatenate([getattr(p, f) for p in parts])
+                         for f in ("q", "qd", "qdd", "qddd")))
+
+
+@dataclass(frozen=True, eq=False)
+class FramePath:
+    """The joint path as a function of the frame coordinate (see the module docstring).
+
+    Attributes:
+        coef: Piece coefficients, shape (n - 1, 6, 8).
+        q_frames: The frame solutions, shape (n, 8) [m, rad].
+        dt: Film frame interval [s].
+        still: Per axis, whether each frame interval is a straight (hold) line, (n - 1, 8).
+        clamped_for_limits: Per axis, the knots whose derivatives were reduced to keep the
+            path inside the position range, (n, 8).
+    """
+
+    coef: Array
+    q_frames: Array
+    dt: float
+    still: BoolArray
+    clamped_for_limits: BoolArray
+
+    @classmethod
+    def fit(cls, q: Array, dt: float, lower: Array, upper: Array) -> FramePath:
+        """The path through frame solutions ``q`` (n, 8) inside ``[lower, upper]`` (8,)."""
+        n, m = q.shape
+        diff = np.diff(q, axis=0)
+        still = np.abs(diff) <= HOLD_TOL
+        # A knot next to a hold is clamped to the hold's slope and zero acceleration.
+        clamped = np.zeros((n, m), dtype=bool)
+        v_given = np.zeros((n, m))
+        w_given = np.zeros((n, m))
+        clamped[1:] |= still
+        clamped[:-1] |= still
+        v_given[1:] = np.where(still, diff, 0.0)
+        v_given[:-1] = np.where(still, diff, v_given[:-1])
+        jerk = _end_jerk(q, still)
+        v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+        limited = np.zeros((n, m), dtype=bool)
+        for _ in range(_REFIT_ROUNDS):
+            out = _overshooting_knots(q, v, w, still, lower, upper) & ~limited
+            if not np.any(out):
+                break
+            v_in, w_in = _pulled_inside(q, v, w, lower, upper)
+            limited |= out
+            clamped |= out
+            v_given = np.where(out, v_in, v_given)
+            w_given = np.where(out, w_in, w_given)
+            v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+        out = _overshooting_knots(q, v, w, still, lower, upper)
+        if np.any(out):  # still out after the refits: pull in without refitting
+            v_in, w_in = _pulled_inside(q, v, w, lower, upper)
+            limited |= out
+            v, w = np.where(out, v_in, v), np.where(out, w_in, w)
+        coef = hermite_coefficients(q, v, w)
+        # Holds are exact straight lines.
+        coef[:, 1] = np.where(still, diff, coef[:, 1])
+        coef[:, 2:] = np.where(still[:, None, :], 0.0, coef[:, 2:])
+        return cls(coef=coef, q_frames=q, dt=dt, still=still, clamped_for_limits=limited)
+
+    @property
+    def n(self) -> int:
+        return int(self.q_frames.shape[0])
+
+    def at(self, x: Array, order: int = 3) -> list[Array]:
+        """Derivatives 0..order with respect to x at frame coordinates x, each (m, 8)."""
+        last = self.n - 2
+        idx = np.clip(np.floor(x).astype(np.int64), 0, last)
+        tau = (x - idx)[:, None]
+        c = self.coef[idx]  # (m, 6, 8)
+        out: list[Array] = []
+        for d in range(order + 1):
+            # Horner on the d-th derivative's coefficients k!/(k-d)! c_k.
+            acc = c[:, DEGREE] * math.perm(DEGREE, d)
+            for k in range(DEGREE - 1, d - 1, -1):
+                acc = acc * tau + c[:, k] * math.perm(k, d)
+            out.append(acc)
+        out[0] = np.where((x >= self.n - 1)[:, None], self.q_frames[-1], out[0])
+        on_knot = x == idx
+        out[0][on_knot] = self.q_frames[idx[on_knot]]
+        return out
+
+    def on_grid(self, ticks: int) -> tuple[Array, list[Array]]:
+        """Frame coordinates and derivatives 0..3 on ``ticks`` equal steps per frame.
+
+        Frame i is sample ``i * ticks``, exactly at its solution. Every frame interval has
+        the same local coordinates, so this is one matrix product.
+        """
+        n, m = self.n, self.coef.shape[2]
+        tau = np.arange(ticks, dtype=np.float64) / ticks
+        k = np.arange(DEGREE + 1)
+        fac = np.array([[math.perm(int(kk), d) for kk in k] for d in range(4)], dtype=np.float64)
+        powers = tau[:, None] ** np.maximum(k[None, :] - np.arange(4)[:, None, None], 0)
+        basis = np.where(k >= np.arange(4)[:, None, None], fac[:, None, :] * powers, 0.0)
+        end = fac @ self.coef[-1]  # tau = 1 on the last piece, (4, 8)
+        out = [np.concatenate([np.matmul(basis[d], self.coef).reshape(-1, m), end[d : d + 1]])
+               for d in range(4)]
+        out[0][::ticks] = self.q_frames
+        return uniform_x(n, ticks), out
+
+    def knot_jerk_from_left(self) -> Array:
+        """Third x-derivative at each knot 1..n-1 from the piece before it, (n - 1, 8).
+
+        Jerk may step at a knot next to a hold or clamped for the limits; the stream's
+        samples show the value after the step, the checks need both sides.
+        """
+        c = self.coef
+        out: Array = 6.0 * c[:, 3] + 24.0 * c[:, 4] + 60.0 * c[:, 5]
+        return out
+
+    def timed(self, x: Array, xd: Array, xdd: Array, *, jerk_by_difference: bool = False,
+              t: Array | None = None) -> Samples:
+        """Time derivatives for a time law x(t) given as x, dx/dt, d²x/dt² at each sample.
+
+        ``xd`` is in frames per second. Jerk is exact when ``dx/dt`` is constant; with
+        ``jerk_by_difference`` it is the forward difference of the acceleration over the
+        sample times ``t`` (for time laws whose path acceleration jumps).
+        """
+        return _timed(self.at(x), xd, xdd, jerk_by_difference=jerk_by_difference, t=t)
+
+    def timed_grid(self, ticks: int, xd: float) -> tuple[Array, Samples]:
+        """Samples at constant path speed ``xd`` [frames/s] on ``ticks`` steps per frame."""
+        x, (p0, p1, p2, p3) = self.on_grid(ticks)
+        return x, Samples(q=p0, qd=p1 * xd, qdd=p2 * xd**2, qddd=p3 * xd**3)
+
+
+def _timed(p: list[Array], xd: Array, xdd: Array, *, jerk_by_difference: bool = False,
+           t: Array | None = None) -> Samples:
+    p0, p1, p2, p3 = p
+    xd_ = xd[:, None]
+    xdd_ = xdd[:, None]
+    qd = p1 * xd_
+    qdd = p2 * xd_**2 + p1 * xdd_
+    if jerk_by_difference:
+        if t is None:  # pragma: no cover - internal misuse
+            msg = "jerk by difference needs the sample times"
+            raise ValueError(msg)
+        qddd = np.empty_like(qdd)
+        if t.size > 1:
+            fd = np.diff(qdd, axis=0) / np.diff(t)[:, None]
+            qddd[:-1] = fd
+            qddd[-1] = fd[-1]
+        else:
+            qddd[:] = 0.0
+    else:
+        qddd = p3 * xd_**3 + 3.0 * p2 * xd_ * xdd_
+    return Samples(q=p0, qd=qd, qdd=qdd, qddd=qddd)
+
+
+def _end_jerk(q: Array, still: BoolArray) -> Array:
+    """Jerk (frame units) at the free first and last frame, shape (2, 8).
+
+    That of the least-squares cubic through the (up to) :data:`END_FRAMES` frames of the
+    moving stretch at each end; zero (natural) when the stretch has fewer than five frames.
+    """
+    n, m = q.shape
+    jerk = np.zeros((2, m))
+    for side in (0, 1):
+        # Frames of each axis's end stretch: up to END_FRAMES, stopping at a hold.
+        order = slice(None) if side == 0 else slice(None, None, -1)
+        moving = ~still[order][: END_FRAMES - 1]
+        length = 1 + np.cumprod(moving, axis=0).sum(axis=0)
+        for count in range(5, END_FRAMES + 1):
+            cols = length == count
+            if np.any(cols):
+                x = np.arange(count, dtype=np.float64)
+                weights = 6.0 * np.linalg.pinv(np.vander(x, 4, increasing=True))[3]
+                values = q[:count] if side == 0 else q[n - count :]
+                jerk[side, cols] = weights @ values[:, cols]
+    return jerk
+
+
+def _overshooting_knots(
+    y: Array, v: Array, w: Array, still: BoolArray, lower: Array, upper: Array
+) -> BoolArray:
+    """Knots of the moving pieces that leave ``[lower, upper]`` between their frames, (n, 8).
+
+    The Bernstein (Bezier) control points of a piece bound it (convex hull); only pieces
+    whose control points poke out are solved exactly for their extremes (the roots of the
+    derivative). Pieces with a frame outside the range are left to the limit checks.
+    """
+    n, m = y.shape
+    pts = np.stack([y[:-1], y[:-1] + v[:-1] / 5.0, y[:-1] + 0.4 * v[:-1] + w[:-1] / 20.0,
+                    y[1:] - 0.4 * v[1:] + w[1:] / 20.0, y[1:] - v[1:] / 5.0, y[1:]])
+    ends_inside = ((pts[0] >= lower) & (pts[0] <= upper) & (pts[5] >= lower)
+                   & (pts[5] <= upper))
+    maybe = ~still & ends_inside & ((pts.max(axis=0) > upper) | (pts.min(axis=0) < lower))
+    out = np.zeros((n, m), dtype=bool)
+    for i, j in zip(*np.nonzero(maybe), strict=True):
+        c = hermite_coefficients(y[i : i + 2, j : j + 1], v[i : i + 2, j : j + 1],
+                                 w[i : i + 2, j : j + 1])[0, :, 0]
+        deriv = np.arange(1, DEGREE + 1) * c[1:]  # increasing powers
+        roots = np.roots(deriv[::-1]) if np.any(deriv[1:] != 0.0) else np.zeros(0)
+        tau = roots.real[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < 1)]
+        values = np.polynomial.polynomial.polyval(tau, c)
+        if np.any(values > upper[j]) or np.any(values < lower[j]):
+            out[i, j] = out[i + 1, j] = True
+    return out
+
+
+def _pulled_inside(
+    y: Array, v: Array, w: Array, lower: Array, upper: Array
+) -> tuple[Array, Array]:
+    """Knot derivatives changed as little as possible so that the four control points next
+    to each knot are inside ``[lower, upper]``.
+
+    The control points of a piece from (y0, v0, w0) to (y1, v1, w1) are y0, y0 + v0/5,
+    y0 + 2 v0/5 + w0/20, y1 - 2 v1/5 + w1/20, y1 - v1/5, y1. Next to a knot that leaves
+    ``room`` to the nearer limit this needs ``|v| <= 5 room`` and then ``w / 20`` within
+    ``0.4 |v|`` of both limits: at a knot on a limit the path stops there (v = 0) and may
+    only curve back. With all its control points inside, a piece stays inside (convex hull).
+    """
+    room_up = np.maximum(upper - y, 0.0)
+    room_down = np.maximum(y - lower, 0.0)
+    speed = np.minimum(np.abs(v), 5.0 * np.minimum(room_up, room_down))
+    v2 = np.copysign(speed, v)
+    w2 = np.clip(w, -20.0 * (room_down - 0.4 * speed), 20.0 * (room_up - 0.4 * speed))
+    return v2, w2
+
+
+def runs(mask: BoolArray) -> list[tuple[int, int]]:
+    """Half-open index ranges [a, b) of the True runs of a 1-D mask."""
+    padded = np.concatenate([[0], mask.astype(np.int8), [0]])
+    edges = np.flatnonzero(np.diff(padded))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def uniform_x(n: int, ticks: int) -> Array:
+    """Frame coordinates of a uniform grid with ``ticks`` samples per frame interval.
+
+    Frame i is sample i*ticks and its coordinate is exactly i.
+    """
+    return np.arange((n - 1) * ticks + 1, dtype=np.float64) / ticks
+

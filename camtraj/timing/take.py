@@ -1,0 +1,412 @@
+"""The timing stage's entry point: :func:`time_shot`, the :class:`Take` it returns and its
+:class:`TimingReport`; ``"shot"`` and ``"scale"`` modes.
+
+Units: SI throughout (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from camtraj.timing.edges import runout, runup, stop_slowdown
+from camtraj.timing.limits import (
+    LIMIT_RTOL,
+    N_AXES,
+    FrameMap,
+    Limits,
+    LimitViolation,
+    TimingLimitError,
+    fmt,
+    peak_use,
+    shot_error,
+    slowdown,
+    violations,
+)
+from camtraj.timing.optimal import OPTIMAL_SLACK, optimal
+from camtraj.timing.path import FramePath, Samples
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+MODES: tuple[str, ...] = ("shot", "scale", "optimal")
+#: Film frame times may deviate from a uniform grid by this fraction of the frame interval.
+UNIFORM_RTOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class TimingReport:
+    """What the timing stage found.
+
+    Attributes:
+        peak_use: axis -> quantity -> fraction of the limit, measured at every servo sample of
+            the SHOT part of the take (first to last film frame). For velocity, acceleration
+            and jerk it is ``max |value| / limit``. For position it is
+            ``max |q - mid| / half_range`` with ``mid``, ``half_range`` the middle and half
+            width of the axis's range: 0 at the middle, 1 touching a limit.
+        position_range: axis -> (min, max) position over the shot part [m or rad].
+        max_speed: Maximum feasible speed as a fraction of real time, from the shot's own
+            (real-time) timing: 1.0 means the shot's timing just fits, 0.5 that the robot can
+            only do it at half speed, 2.0 that it could go twice as fast. Velocity scales with
+            the speed, acceleration with its square, jerk with its cube. ``inf`` if nothing
+            moves.
+        feasible_fps: The frame rate at which the move could be shot at ``max_speed``
+            (``fps * max_speed``) [frames/s], for a later speed change in post.
+        limiting: Every (axis, quantity) the shot's own real-time timing exceeds (what forces
+            a slower take), worst first.
+        exceeded: Every (axis, quantity) the take itself still exceeds (only jerk in
+            ``"optimal"`` mode: toppra does not bound jerk). Empty otherwise.
+        runup: The move from rest into the first frame: ``duration`` [s] of the ruckig move,
+            ``hold`` [s] at rest before it (so the first frame lands on a servo tick),
+            ``start`` axis -> start position [m or rad], ``travel`` axis -> first-frame
+            position minus start position, ``extent`` axis -> max - min position during the
+            move (how much track it needs before the first frame).
+        runout: The same for the move from the last frame to rest (``end`` instead of
+            ``start``, ``travel`` = end - last-frame position, ``hold`` at rest after it).
+        warnings: Things a person should know that do not stop the take.
+        fps: Frame rate of the input shot [frames/s].
+        ticks_per_frame: Servo samples per film frame in the take (``None`` in ``"optimal"``
+            mode, where it varies from frame to frame).
+    """
+
+    peak_use: dict[str, dict[str, float]]
+    position_range: dict[str, tuple[float, float]]
+    max_speed: float
+    feasible_fps: float
+    limiting: list[LimitViolation]
+    exceeded: list[LimitViolation]
+    runup: dict[str, Any]
+    runout: dict[str, Any]
+    warnings: list[str]
+    fps: float
+    ticks_per_frame: int | None
+
+
+@dataclass(frozen=True, eq=False)
+class Take:
+    """A timed trajectory from rest to rest, sampled at the servo rate.
+
+    Attributes:
+        t: Sample times [s], shape (m,), ``t[0] = 0`` (the take starts at rest).
+        q: Positions [m, rad], shape (m, 8).
+        qd: Velocities [m/s, rad/s], shape (m, 8).
+        qdd: Accelerations [m/s², rad/s²], shape (m, 8).
+        qddd: Jerks [m/s³, rad/s³], shape (m, 8). Exact values for the spline and ruckig
+            parts; in the shot part of ``"optimal"`` mode the mean jerk over the following
+            servo step (toppra's time law has piecewise-constant path acceleration).
+        frame_times: Time of each film frame in the take [s], shape (n,) (after run-up, after
+            any retime); ``t[frame_samples] == frame_times`` exactly.
+        frame_samples: Index into ``t`` of each film frame, shape (n,).
+        frame_numbers: Film frame number of each frame, shape (n,).
+        mode: ``"shot"``, ``"scale"`` or ``"optimal"``.
+        speed_factor: Duration of the shot part in the take / original shot duration (1.0 for
+            ``"shot"``; above 1 means slowed down, below 1 sped up).
+        rate: Effective servo rate [Hz]: ``1 / step``. In ``"shot"`` and ``"scale"`` modes the
+            grid is uniform and the rate is an integer multiple of the take's frame rate,
+            nearest to the requested rate; in ``"optimal"`` mode each frame interval is cut
+            into equal steps no longer than ``1 / requested rate`` and this is the lowest
+            rate (longest step) used.
+        uniform: Whether every step of ``t`` has the same length.
+        shot_start: Take time of the first film frame [s].
+        shot_end: Take time of the last film frame [s].
+        report: The :class:`TimingReport`.
+    """
+
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+    frame_times: Array
+    frame_samples: IntArray
+    frame_numbers: IntArray
+    mode: str
+    speed_factor: float
+    rate: float
+    uniform: bool
+    shot_start: float
+    shot_end: float
+    report: TimingReport
+
+    @property
+    def duration(self) -> float:
+        """Length of the whole take [s]."""
+        return float(self.t[-1])
+
+
+
+def time_shot(
+    q_frames: ArrayLike,
+    frame_times: ArrayLike,
+    limits: Limits,
+    *,
+    mode: str = "shot",
+    rate: float = 250.0,
+    frame_numbers: ArrayLike | None = None,
+) -> Take:
+    """Time a joint path for the robot: from rest, through every film frame, to rest.
+
+    Args:
+        q_frames: Joint solution of every film frame [m, rad], shape (n, 8), n >= 2.
+        frame_times: Time of every film frame in the shot [s], shape (n,), uniformly spaced
+            (1/fps apart); only the spacing is used.
+        limits: The robot's limits.
+        mode: ``"shot"`` keeps the film's timing and raises :class:`TimingLimitError` if a
+            limit is exceeded; ``"scale"`` slows the whole move by the smallest uniform factor
+            that fits velocity, acceleration and jerk; ``"optimal"`` retimes the path
+            time-optimally under velocity and acceleration limits (toppra), keeping still
+            stretches as holds of their original duration.
+        rate: Requested servo rate [Hz].
+        frame_numbers: Film frame number of every frame, shape (n,) (default 0..n-1); used in
+            messages and reports.
+
+    Returns:
+        The :class:`Take`.
+
+    Raises:
+        ValueError: Bad shapes, non-finite values, non-increasing or non-uniform times, an
+            unknown mode or a non-positive rate.
+        TimingLimitError: A limit is exceeded (``"shot"`` mode, including a run-up or
+            run-out that could not stay under a velocity limit), a position limit is crossed
+            (every mode, including by the run-up or run-out), or the retime fails.
+    """
+    q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate)
+    n = q.shape[0]
+    fps = 1.0 / dt
+    path = FramePath.fit(q, dt, limits.lower, limits.upper)
+
+    # The shot's own timing, sampled at the servo rate: limits, max speed.
+    ticks0 = max(1, round(rate * dt))
+    rt_x, rt, rt_checked, rt_checked_x = _grid_samples(path, ticks0, fps)
+    edge_need = _edge_slowdown(rt, limits)
+    need = max(slowdown(rt_checked, limits), float(edge_need.max()))
+    max_speed = 1.0 / need if need > 0 else math.inf
+    limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
+    position_bad = [v for v in limiting if v.quantity == "position"]
+
+    if mode == "shot" and limiting:
+        raise shot_error(limiting, max_speed, fps)
+    if mode == "shot" and edge_need.max() > 1.0 + LIMIT_RTOL:
+        raise _edge_error(rt, edge_need, limits, frames, max_speed, fps)
+    if position_bad:
+        raise shot_error(position_bad, max_speed, fps)
+
+    warnings: list[str] = []
+    exceeded: list[LimitViolation] = []
+    if mode == "shot":
+        shot, shot_x, speed_factor, ticks = rt, rt_x, 1.0, ticks0
+        shot_rate = ticks0 * fps
+        shot_t = np.arange(rt_x.size) / shot_rate
+        frame_idx = np.arange(n, dtype=np.int64) * ticks
+    elif mode == "scale":
+        speed_factor, ticks, shot, shot_x = _scale(path, dt, rate, limits, need)
+        shot_rate = ticks / (speed_factor * dt)
+        shot_t = np.arange(shot_x.size) / shot_rate
+        frame_idx = np.arange(n, dtype=np.int64) * ticks
+    else:
+        scale_factor = max(1.0, need)
+        shot_t, shot_x, shot, frame_idx = optimal(path, limits, rate, scale_factor)
+        speed_factor = float(shot_t[-1] / (dt * (n - 1)))
+        ticks = 0
+        shot_rate = 0.0
+
+    # Position limits of the shot part as sampled in the take.
+    take_frames = FrameMap.of(shot_x, frames)
+    pos_bad = [v for v in violations(shot, limits, take_frames, LIMIT_RTOL)
+               if v.quantity == "position"]
+    if pos_bad:
+        raise shot_error(pos_bad, max_speed, fps)
+    if mode == "optimal":
+        exceeded = [v for v in violations(shot, limits, take_frames, OPTIMAL_SLACK)
+                    if v.quantity == "jerk"]
+        for v in exceeded:
+            warnings.append(
+                f"{v.describe()} (optimal timing does not bound jerk; "
+                "use --timing scale for a jerk-limited take)"
+            )
+
+    # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
+    step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
+    up = runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
+    out = runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], limits, step, frames[-1])
+
+    n_up = up.q.shape[0]
+    m = n_up + shot.q.shape[0] + out.q.shape[0]
+    if mode == "optimal":
+        t_shot = n_up * step + shot_t
+        t = np.concatenate([
+            np.arange(n_up) * step, t_shot, t_shot[-1] + np.arange(1, out.q.shape[0] + 1) * step
+        ])
+        steps = np.diff(t)
+        eff_rate = float(1.0 / steps.max()) if steps.size else float(rate)
+        uniform = False
+    else:
+        t = np.arange(m) * step
+        eff_rate = shot_rate
+        uniform = True
+    q_all = np.concatenate([up.q, shot.q, out.q])
+    qd_all = np.concatenate([up.qd, shot.qd, out.qd])
+    qdd_all = np.concatenate([up.qdd, shot.qdd, out.qdd])
+    qddd_all = np.concatenate([up.qddd, shot.qddd, out.qddd])
+    frame_samples = (n_up + frame_idx).astype(np.int64)
+    frame_times_take = t[frame_samples]
+
+    use, position_range = peak_use(shot, limits)
+    report = TimingReport(
+        peak_use=use,
+        position_range=position_range,
+        max_speed=max_speed,
+        feasible_fps=fps * max_speed,
+        limiting=limiting,
+        exceeded=exceeded,
+        runup=up.report,
+        runout=out.report,
+        warnings=warnings + up.warnings + out.warnings,
+        fps=fps,
+        ticks_per_frame=ticks if mode != "optimal" else None,
+    )
+    for arr in (t, q_all, qd_all, qdd_all, qddd_all):
+        if not np.all(np.isfinite(arr)):  # pragma: no cover - a bug, not a user error
+            msg = "internal error: the timed take has non-finite values"
+            raise RuntimeError(msg)
+    return Take(
+        t=t,
+        q=q_all,
+        qd=qd_all,
+        qdd=qdd_all,
+        qddd=qddd_all,
+        frame_times=frame_times_take,
+        frame_samples=frame_samples,
+        frame_numbers=frames,
+        mode=mode,
+        speed_factor=speed_factor,
+        rate=eff_rate,
+        uniform=uniform,
+        shot_start=float(frame_times_take[0]),
+        shot_end=float(frame_times_take[-1]),
+        report=report,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Input checks
+# ---------------------------------------------------------------------------------------------
+
+
+def _validate(
+    q_frames: ArrayLike,
+    frame_times: ArrayLike,
+    frame_numbers: ArrayLike | None,
+    mode: str,
+    rate: float,
+) -> tuple[Array, float, IntArray]:
+    q = np.array(q_frames, dtype=np.float64)
+    times = np.array(frame_times, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != N_AXES:
+        msg = f"q_frames must have shape (n, {N_AXES}), got {q.shape}"
+        raise ValueError(msg)
+    n = q.shape[0]
+    if n < 2:
+        msg = f"a shot needs at least 2 frames, got {n}"
+        raise ValueError(msg)
+    if times.shape != (n,):
+        msg = f"frame_times must have shape ({n},) to match q_frames, got {times.shape}"
+        raise ValueError(msg)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(times))):
+        msg = "q_frames and frame_times must be finite (no NaN or inf)"
+        raise ValueError(msg)
+    steps = np.diff(times)
+    if np.any(steps <= 0):
+        bad = int(np.flatnonzero(steps <= 0)[0])
+        msg = f"frame_times must increase: frame {bad + 1} is not after frame {bad}"
+        raise ValueError(msg)
+    dt = float((times[-1] - times[0]) / (n - 1))
+    if np.max(np.abs(steps - dt)) > UNIFORM_RTOL * dt:
+        msg = "frame_times must be uniformly spaced (1/fps apart)"
+        raise ValueError(msg)
+    if mode not in MODES:
+        msg = f"timing mode {mode!r} is not one of {', '.join(MODES)}"
+        raise ValueError(msg)
+    if not (math.isfinite(rate) and rate > 0):
+        msg = f"servo rate must be a positive number [Hz], got {rate}"
+        raise ValueError(msg)
+    if frame_numbers is None:
+        frames = np.arange(n, dtype=np.int64)
+    else:
+        frames = np.array(frame_numbers).astype(np.int64)
+        if frames.shape != (n,):
+            msg = f"frame_numbers must have shape ({n},), got {frames.shape}"
+            raise ValueError(msg)
+    return q, dt, frames
+
+
+
+
+def _grid_samples(path: FramePath, ticks: int, speed: float) -> tuple[Array, Samples, Samples,
+                                                                        Array]:
+    """The path at constant speed [frames/s] on ``ticks`` steps per frame, and the samples
+    the limit checks see: the stream plus the jerk just before every frame (the jerk may
+    step at a frame next to a hold or a knot kept inside the position range).
+
+    Returns: the stream's frame coordinates and samples, the checked samples and their
+    frame coordinates.
+    """
+    x, stream = path.timed_grid(ticks, speed)
+    k = slice(ticks, None, ticks)  # frames 1..n-1
+    before = Samples(stream.q[k], stream.qd[k], stream.qdd[k],
+                     path.knot_jerk_from_left() * speed**3)
+    checked = Samples.join([stream, before])
+    checked_x = np.concatenate([x, x[k] - 0.5 / ticks])
+    return x, stream, checked, checked_x
+
+
+def _edge_slowdown(s: Samples, limits: Limits) -> Array:
+    """The slow-down the run-up (row 0) and run-out (row 1) need for velocity, (2, 8)."""
+    return np.stack([stop_slowdown(-s.qd[0], s.qdd[0], limits),
+                     stop_slowdown(s.qd[-1], s.qdd[-1], limits)])
+
+
+def _edge_error(s: Samples, need: Array, limits: Limits, frames: IntArray, max_speed: float,
+                fps: float) -> TimingLimitError:
+    side, j = (int(i) for i in np.unravel_index(int(np.argmax(need)), need.shape))
+    k = 0 if side == 0 else -1
+    v, a = float(s.qd[k, j]), float(s.qdd[k, j])
+    peak = abs(v) + a * a / (2.0 * float(limits.jerk[j]))
+    revolute = bool(limits.revolute[j])
+    what = (f"the run-up into frame {frames[0]}" if side == 0
+            else f"the run-out from frame {frames[-1]}")
+    pct = math.floor(max_speed * 100.0)
+    limit = fmt(float(limits.velocity[j]), "velocity", revolute)
+    msg = (
+        f"{what} would need {limits.names[j]} velocity "
+        f"{fmt(peak, 'velocity', revolute)}, beyond {limit}"
+        f" (the shot {'starts' if side == 0 else 'ends'} still accelerating near that speed)"
+        f"; the move fits at {pct}% speed - try --timing scale"
+    )
+    return TimingLimitError(msg, max_speed=max_speed, feasible_fps=fps * max_speed)
+
+
+def _scale(
+    path: FramePath, dt: float, rate: float, limits: Limits, factor: float
+) -> tuple[float, int, Samples, Array]:
+    """Slow the move uniformly by the smallest factor >= 1 that fits (resampled and verified).
+
+    Velocity scales with 1/s, acceleration with 1/s², jerk with 1/s³, so the factor follows
+    from the real-time peaks. The take's grid has different sample points from the real-time
+    check (ticks per frame change with s), so the stream is resampled and the factor raised
+    if a sample of the resampled stream still exceeds a limit.
+    """
+    s = max(1.0, factor)
+    for _ in range(20):
+        ticks = max(1, round(rate * s * dt))
+        x, samples, checked, _ = _grid_samples(path, ticks, 1.0 / (s * dt))
+        k = max(slowdown(checked, limits), float(_edge_slowdown(samples, limits).max()))
+        if k <= 1.0 + LIMIT_RTOL:
+            return s, ticks, samples, x
+        s *= k * (1.0 + 1e-12)
+    msg = "internal error: the scale factor did not settle"  # pragma: no cover
+    raise RuntimeError(msg)  # pragma: no cover

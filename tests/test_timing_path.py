@@ -1,0 +1,260 @@
+"""The joint path between frames: spline maths, shot edges and position limits.
+
+Facts used:
+* scipy's B-spline interpolation (an independent implementation) gives the same quintic
+  spline for the same end conditions;
+* a disturbance of one frame must not move the path's acceleration or jerk more at a free end
+  than it does in the interior (the shot-edge spikes of issue 7);
+* divided differences of the servo samples are weighted means of the derivatives, so they
+  must stay inside the limits whatever the spline's own derivatives say;
+* the position limits hold at every servo sample and on a dense grid between frames.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from scipy.interpolate import make_interp_spline
+
+from camtraj.robot import JOINT_NAMES, Robot
+from camtraj.timing import Limits, Take, TimingLimitError, time_shot
+from camtraj.timing.path import FramePath
+from camtraj.timing.quintic import hermite_coefficients, solve_knot_derivatives
+
+Array = NDArray[np.float64]
+FPS = 24.0
+HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
+TRACK, LIFT, EXTEND, ELBOW, TILT = (JOINT_NAMES.index(a) for a in
+                                    ("track", "lift", "extend", "elbow", "tilt"))
+SLACK = 1e-3
+
+
+@pytest.fixture(scope="module")
+def limits() -> Limits:
+    return Limits.from_robot(Robot.default())
+
+
+def divided(t: Array, y: Array, order: int) -> Array:
+    d = y.copy()
+    for level in range(1, order + 1):
+        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
+    return d * math.factorial(order)
+
+
+def assert_inside_by_differences(take: Take, limits: Limits) -> None:
+    tol = 1e-12 * (limits.upper - limits.lower)
+    assert np.all(take.q <= limits.upper + tol)
+    assert np.all(take.q >= limits.lower - tol)
+    for order, bound in ((1, limits.velocity), (2, limits.acceleration)):
+        worst = np.max(np.abs(divided(take.t, take.q, order)) / bound)
+        assert worst <= 1 + SLACK, f"order {order}: {worst:.6f} of the limit"
+
+
+# ---------------------------------------------------------------------------------------------
+# The spline solver
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [3, 4, 7, 30, 257])
+def test_spline_matches_scipy(n: int) -> None:
+    rng = np.random.default_rng(n)
+    y = np.cumsum(rng.normal(size=(n, 3)), axis=0)
+    clamped = np.zeros((n, 3), dtype=bool)
+    v_given = np.zeros((n, 3))
+    w_given = np.zeros((n, 3))
+    clamped[[0, -1], 1] = True  # column 1 clamped at both ends, column 2 at its start
+    v_given[[0, -1], 1] = (0.3, 1.1)
+    w_given[[0, -1], 1] = (-0.2, 0.5)
+    clamped[0, 2] = True
+    v_given[0, 2] = 0.7
+    jerk = rng.normal(size=(2, 3))
+    snap = rng.normal(size=(2, 3))
+    v, w = solve_knot_derivatives(y, clamped, v_given, w_given, jerk, snap)
+    x = np.arange(n, dtype=np.float64)
+    bcs = [
+        ([(3, jerk[0, 0]), (4, snap[0, 0])], [(3, jerk[1, 0]), (4, snap[1, 0])]),
+        ([(1, 0.3), (2, -0.2)], [(1, 1.1), (2, 0.5)]),
+        ([(1, 0.7), (2, 0.0)], [(3, jerk[1, 2]), (4, snap[1, 2])]),
+    ]
+    for j, bc in enumerate(bcs):
+        ref = make_interp_spline(x, y[:, j], k=5, bc_type=bc)
+        scale = 1 + np.abs(y[:, j]).max()
+        assert np.max(np.abs(ref(x, 1) - v[:, j])) < 1e-11 * scale
+        assert np.max(np.abs(ref(x, 2) - w[:, j])) < 1e-11 * scale
+    # Clamped knots keep their given derivatives bit for bit (exact by construction).
+    assert np.array_equal(v[clamped], v_given[clamped])
+    assert np.array_equal(w[clamped], w_given[clamped])
+    c = hermite_coefficients(y, v, w)
+    assert np.array_equal(c[:, 0], y[:-1])
+
+
+def _peak(path: FramePath, order: int) -> Array:
+    """Peak |d^order q / dx^order| per frame interval on a dense grid, (n - 1,) for axis 0."""
+    n = path.n
+    x = np.linspace(0.0, n - 1.0, 64 * (n - 1) + 1)
+    values = np.abs(path.at(x, order)[order][:, 0])
+    piece = np.minimum(np.floor(x).astype(int), n - 2)
+    return np.array([values[piece == i].max() for i in range(n - 1)])
+
+
+def test_a_disturbed_end_frame_moves_the_path_no_more_than_an_interior_one() -> None:
+    # One frame of an axis moving at constant speed is moved by 1. The path is linear in the
+    # frames and reproduces the straight line, so what changes is the disturbance's response.
+    n = 40
+    lower, upper = np.full(8, -1e9), np.full(8, 1e9)
+    base = np.outer(np.arange(n, dtype=np.float64), np.ones(8))  # in motion at both ends
+
+    def response(k: int) -> tuple[float, float]:
+        q = base.copy()
+        q[k, 0] += 1.0
+        path = FramePath.fit(q, 1.0, lower, upper)
+        return float(_peak(path, 2).max()), float(_peak(path, 3).max())
+
+    acc_in, jerk_in = response(n // 2)
+    for k in (0, 1, 2, 3, 5, n - 6, n - 4, n - 3, n - 2, n - 1):
+        acc, jerk = response(k)
+        assert acc <= 1.15 * acc_in, f"frame {k}: acceleration {acc:.2f} vs {acc_in:.2f}"
+        assert jerk <= 1.01 * jerk_in, f"frame {k}: jerk {jerk:.2f} vs {jerk_in:.2f}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Shot edges
+# ---------------------------------------------------------------------------------------------
+
+
+def in_motion(seconds: float, kink_at: tuple[int, ...], eps: float) -> tuple[Array, Array]:
+    """A camera moving along the track at constant speed with a slow tilt, starting and
+    ending in motion, with an IK-like disturbance of ``eps`` rad on the elbow at frames
+    ``kink_at`` (e.g. where the redundancy choice switches)."""
+    n = int(seconds * FPS) + 1
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = 3.0 + 0.8 * t
+    q[:, TILT] = -0.1 + math.radians(8.0) * t
+    q[:, ELBOW] = -1.5 + 0.25 * np.sin(0.9 * t + 0.4)
+    q[:, LIFT] = 0.1 * np.cos(0.7 * t)
+    for k in kink_at:
+        q[k % n, ELBOW] += eps
+    return t, q
+
+
+@pytest.mark.parametrize("seconds", [1.0, 2.0])
+@pytest.mark.parametrize("eps", [2e-4, 3e-4])
+def test_short_moves_in_motion_fit_at_their_edges_when_their_interior_fits(
+    limits: Limits, seconds: float, eps: float
+) -> None:
+    n = int(seconds * FPS) + 1
+    t, q = in_motion(seconds, (n // 2,), eps)
+    interior = time_shot(q, t, limits)  # the disturbance mid-shot fits at shot timing
+    need = 1.0 / interior.report.max_speed
+    assert 0.8 < need < 1.0
+    for kinks in ((1, n - 2), (2, n - 3), (0, n - 1), (3, n - 4)):
+        t, q = in_motion(seconds, kinks, eps)
+        take = time_shot(q, t, limits)  # raises if an edge does not fit
+        assert 1.0 / take.report.max_speed <= need * (1 + 1e-6), kinks
+        a, b = take.frame_samples[0], take.frame_samples[-1]
+        assert np.max(np.abs(take.q[take.frame_samples] - q)) < 1e-12
+        # The servo stream itself, across the run-up and run-out joins: every divided
+        # difference (a mean of the true derivative) is inside the limits.
+        assert_inside_by_differences(take, limits)
+        assert a > 0
+        assert b < take.t.size - 1  # starts and ends in motion: run-up and run-out
+
+
+# ---------------------------------------------------------------------------------------------
+# Position limits between frames
+# ---------------------------------------------------------------------------------------------
+
+
+def touching_extend_limit(peak: float, width: float, tp: float) -> tuple[Array, Array]:
+    """A fast track move (1.6 m/s) during which the arm reaches out to its 1.5 m limit:
+    a bump towards ``peak`` clipped at 1.5 m, as a solver riding the limit writes it."""
+    n = 49
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = 3.0 + 1.6 * t
+    q[:, EXTEND] = np.minimum(1.5, 1.0 + (peak - 1.0) * np.exp(-(((t - tp) / width) ** 2)))
+    q[:, ELBOW] = -1.5 + 0.3 * np.sin(1.3 * t)
+    return t, q
+
+
+@pytest.mark.parametrize(
+    ("peak", "width", "tp", "at_limit"),
+    [(1.52, 0.3, 0.77, 2), (1.51, 0.15, 0.76, 1), (1.505, 0.2, 0.771, 0)],
+)
+def test_frames_touching_a_limit_convert_with_scale(
+    limits: Limits, peak: float, width: float, tp: float, at_limit: int
+) -> None:
+    t, q = touching_extend_limit(peak, width, tp)
+    upper = float(limits.upper[EXTEND])
+    assert np.sum(q[:, EXTEND] == upper) == at_limit
+    assert np.all(q[:, EXTEND] <= upper)
+    take = time_shot(q, t, limits, mode="scale")
+    assert np.max(np.abs(take.q[take.frame_samples] - q)) < 1e-12
+    assert_inside_by_differences(take, limits)
+    assert np.all(np.abs(take.qd) <= limits.velocity * (1 + 1e-9))
+    assert np.all(np.abs(take.qdd) <= limits.acceleration * (1 + 1e-9))
+    # Between frames, on a grid far finer than any servo rate, the path stays inside.
+    path = FramePath.fit(q, 1 / FPS, limits.lower, limits.upper)
+    x = np.linspace(0.0, q.shape[0] - 1.0, 1000 * (q.shape[0] - 1) + 1)
+    dense = path.at(x, 0)[0]
+    assert np.all(dense <= limits.upper) and np.all(dense >= limits.lower)
+    # Only knots next to the overshoot were changed; far from the limit the path is the
+    # plain spline (C4: the jerk is continuous across frames).
+    changed = np.flatnonzero(path.clamped_for_limits[:, EXTEND])
+    assert changed.size > 0
+    assert np.all(np.abs(q[changed, EXTEND] - upper) < 0.02)
+
+
+def test_a_frame_beyond_a_limit_is_still_reported(limits: Limits) -> None:
+    t, q = touching_extend_limit(1.52, 0.3, 0.77)
+    q[18, EXTEND] = 1.5 + 1e-3
+    with pytest.raises(TimingLimitError, match=r"extend position 1\.5 m is beyond its upper"):
+        time_shot(q, t, limits, mode="scale")
+
+
+# ---------------------------------------------------------------------------------------------
+# Run-up and run-out extents
+# ---------------------------------------------------------------------------------------------
+
+
+def test_stop_move_range_is_exact(limits: Limits) -> None:
+    from camtraj.timing.edges import _StopMove
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        v = rng.uniform(-1.0, 1.0, 8) * limits.velocity
+        a = rng.uniform(-1.0, 1.0, 8) * limits.acceleration
+        move = _StopMove(rng.uniform(-1.0, 1.0, 8), v, a, limits)
+        # ruckig's own evaluation on a dense grid: inside the computed range, and reaching
+        # it to within what the grid can resolve (an extreme inside a step is where the
+        # velocity is zero, so the nearest sample is within a_max * step² / 2 of it).
+        t = np.linspace(0.0, move.duration, 4001)
+        pos, _, _, _ = move.sample(t)
+        step = move.duration / 4000
+        assert np.all(pos >= move.min - 1e-12) and np.all(pos <= move.max + 1e-12)
+        tol = 0.5 * limits.acceleration * step**2 + 1e-12
+        assert np.all(pos.min(axis=0) - move.min <= tol)
+        assert np.all(move.max - pos.max(axis=0) <= tol)
+
+
+def test_a_shot_ending_at_full_speed_while_accelerating_is_slowed_for_its_run_out(
+    limits: Limits,
+) -> None:
+    # The track accelerates at 1.5 m/s² right up to the last frame, reaching 1.95 m/s of
+    # its 2 m/s: every frame fits, but no jerk-limited stop from there stays under 2 m/s.
+    n = 49
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = 3.0 + (1.95 - 1.5 * t[-1]) * t + 0.75 * t**2
+    with pytest.raises(TimingLimitError, match=r"run-out from frame 48 would need track "
+                       r"velocity 2\.0\d m/s, beyond 2 m/s.*try --timing scale"):
+        time_shot(q, t, limits)
+    take = time_shot(q, t, limits, mode="scale")
+    assert take.speed_factor > 1.0
+    assert np.all(np.abs(take.qd) <= limits.velocity * (1 + 1e-9))
+    v = divided(take.t, take.q, 1)
+    assert np.max(np.abs(v) / limits.velocity) <= 1 + SLACK
