@@ -6,17 +6,19 @@ Errors are printed as one ``ERROR:`` line naming the frames, axes and margins; n
 
 from __future__ import annotations
 
-import json
+import contextlib
 import logging
 import math
+import os
 import sys
 from typing import Any, NoReturn
 
 import click
 
 import camtraj
-from camtraj.batch import batch_command, write_json_atomic
-from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
+from camtraj import interrupts, jsonsafe
+from camtraj.batch import batch_command
+from camtraj.errors import CamtrajError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -36,7 +38,74 @@ def _options(kw: dict[str, Any]) -> ConvertOptions:
     return build_options(**kw)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+def stopped(exc: KeyboardInterrupt) -> NoReturn:
+    """One line and exit 128 + signal (130 for Ctrl-C) for a run stopped by a signal."""
+    if isinstance(exc, interrupts.Interrupted):
+        name, code = exc.signal_name, exc.exit_code
+    else:
+        name, code = "SIGINT", 130
+    with contextlib.suppress(OSError, ValueError):
+        click.echo(f"ERROR: stopped by {name}; nothing was written", err=True)
+    sys.exit(code)
+
+
+class _Main(click.Group):
+    """The ``camtraj`` group: a stop by signal or a failing standard output is one line."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            result = super().invoke(ctx)
+            sys.stdout.flush()
+        except KeyboardInterrupt as exc:
+            stopped(exc)
+        except OSError as exc:  # stdout is a full disk, /dev/full or a closed pipe
+            _stdout_failed(exc)
+        return result
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        if not kwargs.get("standalone_mode", True):
+            return super().main(*args, **kwargs)
+        kwargs["standalone_mode"] = False
+        code: Any = 0
+        try:
+            rv = super().main(*args, **kwargs)
+            code = rv if isinstance(rv, int) else 0
+        except SystemExit as exc:
+            code = exc.code
+        except click.exceptions.Abort as exc:
+            cause = exc.__cause__ or exc.__context__
+            stopped(cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt())
+        except KeyboardInterrupt as exc:
+            stopped(exc)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()
+            code = exc.exit_code
+        except click.ClickException as exc:  # usage errors: one line, like every error
+            hint = ""
+            ctx = getattr(exc, "ctx", None)
+            if isinstance(exc, click.UsageError) and ctx is not None:
+                hint = f" (see '{ctx.command_path} --help')"
+            click.echo(f"ERROR: {' '.join(exc.format_message().split())}{hint}", err=True)
+            code = exc.exit_code
+        try:
+            sys.stdout.flush()
+        except OSError as err:
+            _stdout_failed(err, code)
+        sys.exit(code)
+
+
+def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
+    with contextlib.suppress(OSError, ValueError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())  # what is still buffered goes nowhere, quietly
+        reason = exc.strerror or str(exc)
+        click.echo(f"ERROR: cannot write to standard output: {reason[:1].lower()}{reason[1:]}",
+                   err=True)
+    sys.exit(code if isinstance(code, int) and code != 0 else EXIT_INPUT)
+
+
+@click.group(cls=_Main,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(camtraj.__version__, prog_name="camtraj")
 def main() -> None:
     """Turn a previs USD camera move into a motion-control camera robot move.
@@ -69,19 +138,12 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
-    from camtraj.convert import convert as run
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from camtraj.convert import convert as run
 
     try:
-        if summary is not None:
-            _check_writable(summary, "--summary")
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
-        if summary is not None:
-            try:
-                write_json_atomic(_path(summary), result)
-            except OSError as exc:
-                _path(output).unlink(missing_ok=True)  # all or nothing
-                msg = f"cannot write {summary}: {exc.strerror or exc}"
-                raise InputError(msg) from exc
+        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
+                     summary_path=summary)
     except CamtrajError as exc:
         _fail(exc)
     if not quiet:
@@ -100,8 +162,9 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
     and the run-up / run-out extents. Exit code 3 when the shot cannot be done as asked.
     """
-    from camtraj.convert import convert as run
-    from camtraj.timing import TimingLimitError
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from camtraj.convert import convert as run
+        from camtraj.timing import TimingLimitError
 
     options = None
     try:
@@ -114,7 +177,7 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     except CamtrajError as exc:
         _fail(exc)
     if as_json:
-        click.echo(json.dumps(result, indent=2, sort_keys=True, default=_json_default))
+        click.echo(jsonsafe.dumps(result, sort_keys=True))
     else:
         click.echo(_report(result))
     sys.exit(EXIT_OK if result["status"] == "ok" else EXIT_INFEASIBLE)
@@ -132,7 +195,7 @@ def info(mcap_file: str, as_json: bool) -> None:
     except CamtrajError as exc:
         _fail(exc)
     if as_json:
-        click.echo(json.dumps(d, indent=2, sort_keys=True, default=_json_default))
+        click.echo(jsonsafe.dumps(d, sort_keys=True))
         return
     meta = d.get("metadata") or {}
     fr = d.get("frames") or {}
@@ -173,29 +236,6 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 # ---------------------------------------------------------------------------------------------
 # Reports
 # ---------------------------------------------------------------------------------------------
-
-
-def _check_writable(path: str, option: str) -> None:
-    """Fail early (exit 2) when the folder of an output file does not exist."""
-    folder = _path(path).parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        msg = f"cannot write {option} {path}: folder {folder} {what}"
-        raise InputError(msg)
-
-
-def _path(p: str) -> Any:
-    from pathlib import Path
-
-    return Path(p)
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return str(obj)
-    return str(obj)
 
 
 def _unreachable_report(shot: str, exc: UnreachableFramesError) -> dict[str, Any]:

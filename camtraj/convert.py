@@ -11,7 +11,7 @@ import json
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,10 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 import camtraj
+from camtraj import jsonsafe
 from camtraj.errors import InputError
 from camtraj.ik import PathSolution, solve_path_report
-from camtraj.mcap_io import TakeData, write_take
+from camtraj.inputs import require_regular_files, run_inputs
+from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
+from camtraj.outputs import OutputSet
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
@@ -156,6 +159,7 @@ def analyse(
     """
     timings: dict[str, float] = {}
     with _stage(timings, "read"):
+        require_regular_files(shot_path, options)
         robot = load_robot(options)
         placement = load_placement(options)
         shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
@@ -187,24 +191,43 @@ def convert(
     options: ConvertOptions | None = None,
     *,
     progress: bool = False,
+    summary_path: str | Path | None = None,
+    summary_extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
-    With ``output_path`` None nothing is written (``camtraj check``). Raises ``InputError``
-    (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
-    run writes nothing and leaves an existing output untouched.
+    With ``output_path`` None nothing is written (``camtraj check``). With ``summary_path``
+    the summary (plus ``summary_extra``) is written there as JSON; the MCAP and the summary
+    are one result: both are replaced or neither is. Every output path is checked before the
+    solve (its folder, that it is a regular file or nothing, that it is no input and not the
+    other output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
+    frames, axes and margins named; a failed or interrupted run writes nothing and leaves
+    existing outputs untouched.
     """
     options = options or ConvertOptions()
-    bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
-    try:
-        analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
-    finally:
-        bar.close()
-    if output_path is not None:
-        with _stage(analysis.timings, "write"):
-            write_take(output_path, take_data(analysis), analysis.robot,
-                       metadata(analysis, shot_path, options))
-    return summary(analysis, shot_path, output_path, options)
+    with OutputSet() as outputs:
+        if output_path is not None:
+            outputs.add(output_path, "-o")
+        if summary_path is not None:
+            outputs.add(summary_path, "--summary")
+        if outputs.paths:
+            require_regular_files(shot_path, options)
+            outputs.refuse_inputs(run_inputs(shot_path, options))
+        bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
+        try:
+            analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
+        finally:
+            bar.close()
+        if output_path is not None:
+            with _stage(analysis.timings, "write"), outputs.open(output_path) as stream:
+                write_take_to(stream, take_data(analysis), analysis.robot,
+                              metadata(analysis, shot_path, options))
+        result = summary(analysis, shot_path, output_path, options)
+        if summary_path is not None:
+            text = jsonsafe.dumps({**result, **(summary_extra or {})}) + "\n"
+            outputs.write_bytes(summary_path, text.encode("utf-8"))
+        outputs.commit()
+    return result
 
 
 def take_data(analysis: Analysis) -> TakeData:
