@@ -11,6 +11,7 @@ import logging
 import math
 import os
 import sys
+import warnings
 from typing import Any, NoReturn
 
 import click
@@ -53,8 +54,18 @@ class _Main(click.Group):
     """The ``camtraj`` group: a stop by signal or a failing standard output is one line."""
 
     def invoke(self, ctx: click.Context) -> Any:
+        ok = False
         try:
-            result = super().invoke(ctx)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("default")
+                try:
+                    result = super().invoke(ctx)
+                    ok = True
+                except SystemExit as exc:
+                    ok = exc.code in (0, None)
+                    raise
+                finally:
+                    _pass_on_warnings(caught, ok)
             sys.stdout.flush()
         except KeyboardInterrupt as exc:
             stopped(exc)
@@ -92,6 +103,17 @@ class _Main(click.Group):
         except OSError as err:
             _stdout_failed(err, code)
         sys.exit(code)
+
+
+def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
+    """Python warnings (numpy overflow on absurd input…) as one line each, on success only.
+
+    A failed run says what went wrong in its one ERROR line; the warnings add nothing.
+    """
+    if not ok:
+        return
+    for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
+        logging.getLogger("camtraj").warning("%s", text)
 
 
 def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
@@ -273,12 +295,26 @@ def _floor(x: float, digits: int) -> str:
     return f"{math.floor(x * scale) / scale:.{digits}f}"
 
 
-def _floor_pct(x: float) -> int:
-    return math.floor(100.0 * x)
+MAX_SHOWN_SPEED = 100.0
+"""Above this many times real time the report says ">10000%" (the number means nothing)."""
+
+
+def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
+    """'131% of real time (… 31.54 fps)'; a still camera's speed is unbounded (JSON: null)."""
+    if max_speed is None or not math.isfinite(max_speed):
+        return "unbounded (the camera pose never changes)"
+    if max_speed > MAX_SHOWN_SPEED:
+        return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
+                f"{_floor(MAX_SHOWN_SPEED * fps, 0)} fps)")
+    shown = feasible_fps if feasible_fps is not None else max_speed * fps
+    return (f"{math.floor(100.0 * max_speed)}% of real time "
+            f"(could be shot at {_floor(shown, 2)} fps)")
 
 
 def _pct(x: float) -> str:
-    return "   -" if not math.isfinite(x) else f"{100 * x:4.0f}%"
+    if not math.isfinite(x):
+        return "   -"
+    return f"{100 * x:4.0f}%" if x < 100.0 else ">9999%"
 
 
 def _report(r: dict[str, Any]) -> str:
@@ -293,9 +329,11 @@ def _report(r: dict[str, Any]) -> str:
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
-        if math.isfinite(r["max_speed"]):
-            lines.append(f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
-                         f"(shoot at {_floor(r['feasible_fps'], 2)} fps); try --timing scale")
+        speed = r["max_speed"]
+        if speed is not None and math.isfinite(speed):
+            fps = r["feasible_fps"] / speed if speed > 0 else math.nan
+            lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
+                         "; try --timing scale")
         return "\n".join(lines)
     fr = r["frames"]
     lines = [
@@ -304,8 +342,7 @@ def _report(r: dict[str, Any]) -> str:
         f"  timing {r['timing']}: take {r['duration']:.2f} s (shot {r['shot_start']:.2f}-"
         f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
-        f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
-        f"(could be shot at {_floor(r['feasible_fps'], 2)} fps)",
+        f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   run-up   run-out (extent)",
     ]
     for i, name in enumerate(JOINT_NAMES):

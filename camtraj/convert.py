@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
-from camtraj.errors import InputError
+from camtraj.errors import InputError, ShotFileError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.inputs import require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
@@ -120,6 +120,22 @@ class Analysis:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+MAX_DISTANCE_M = 1.0e6
+"""Farthest a camera may be from the stage origin [m]; beyond is a unit or export error."""
+
+
+def check_distances(shot: Shot) -> None:
+    """Refuse a camera farther than :data:`MAX_DISTANCE_M` from the stage origin."""
+    dist = np.abs(shot.cam2world[:, :3, 3]).max(axis=1)  # no overflow, unlike a norm
+    far = np.flatnonzero(~(dist <= MAX_DISTANCE_M))
+    if far.size:
+        i = int(far[0])
+        msg = (f"{shot.source}: the camera is {dist[i]:.3g} m out from the stage origin at frame "
+               f"{int(shot.frames[i])}, more than {MAX_DISTANCE_M:.0f} m "
+               f"(metersPerUnit {shot.meters_per_unit:g}); check the stage units")
+        raise ShotFileError(msg)
+
+
 def load_robot(options: ConvertOptions) -> Robot:
     return Robot.default() if options.robot is None else Robot.from_toml(options.robot)
 
@@ -162,7 +178,12 @@ def analyse(
         require_regular_files(shot_path, options)
         robot = load_robot(options)
         placement = load_placement(options)
-        shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+        try:
+            shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+        except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
+            msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
+            raise ShotFileError(msg) from None
+        check_distances(shot)
         if shot.frames.shape[0] < 2:
             msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
             raise InputError(msg)

@@ -43,7 +43,16 @@ def require_regular_file(path: str | os.PathLike[str], what: str, error: type[In
 
 
 def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions) -> None:
-    """The shot, robot file and set file of a run must be regular files."""
+    """The shot, robot file and set file of a run must be regular files.
+
+    The shot's name must also be valid UTF-8: USD takes file names as UTF-8 text.
+    """
+    try:
+        os.fsdecode(shot).encode("utf-8")
+    except UnicodeEncodeError:
+        name = os.fsdecode(shot).encode("utf-8", "backslashreplace").decode("ascii", "replace")
+        msg = f"{name}: the file name is not valid UTF-8 and USD cannot open it; rename the file"
+        raise ShotFileError(msg) from None
     require_regular_file(shot, "shot", ShotFileError)
     if options.robot is not None:
         require_regular_file(options.robot, "robot file", RobotFileError)
