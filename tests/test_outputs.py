@@ -47,11 +47,16 @@ def test_error_before_commit_replaces_nothing(tmp_path: Path) -> None:
     a, b = tmp_path / "a.mcap", tmp_path / "b.json"
     a.write_bytes(OLD_A)
     b.write_bytes(OLD_B)
-    with pytest.raises(RuntimeError, match="solver broke"), OutputSet() as out:
-        out.add(a, "-o")
-        out.add(b, "--summary")
-        out.write_bytes(a, b"new A")
-        raise RuntimeError("solver broke")
+
+    def run() -> None:
+        with OutputSet() as out:
+            out.add(a, "-o")
+            out.add(b, "--summary")
+            out.write_bytes(a, b"new A")
+            raise RuntimeError("solver broke")
+
+    with pytest.raises(RuntimeError, match="solver broke"):
+        run()
     assert (a.read_bytes(), b.read_bytes()) == (OLD_A, OLD_B)
     assert _names(tmp_path) == ["a.mcap", "b.json"]
 
@@ -72,13 +77,17 @@ def test_failed_second_rename_restores_the_first(
         real_replace(src, dst)
 
     monkeypatch.setattr(outputs_mod.os, "replace", replace)
-    for outputs in ([a, b], [fresh, b]):
-        with pytest.raises(InputError, match=r"b\.json: input/output error; nothing was"), \
-                OutputSet() as out:
-            for p in outputs:
+
+    def run(paths: list[Path]) -> None:
+        with OutputSet() as out:
+            for p in paths:
                 out.add(p)
                 out.write_bytes(p, b"new")
             out.commit()
+
+    for paths in ([a, b], [fresh, b]):
+        with pytest.raises(InputError, match=r"b\.json: input/output error; nothing was"):
+            run(paths)
     assert (a.read_bytes(), b.read_bytes()) == (OLD_A, OLD_B)
     assert not fresh.exists()  # it did not exist before: removed again
     assert _names(tmp_path) == ["a.mcap", "b.json"]
@@ -179,11 +188,18 @@ def test_named_temporary_files_when_unnamed_ones_are_unsupported(
 ) -> None:
     monkeypatch.delattr(outputs_mod.os, "O_TMPFILE", raising=False)
     target = tmp_path / "x.mcap"
-    with pytest.raises(RuntimeError), OutputSet() as out:
-        out.add(target)
-        out.write_bytes(target, b"partial")
-        assert _names(tmp_path) == [temp_name("x.mcap")]
-        raise RuntimeError
+    seen: list[list[str]] = []
+
+    def run() -> None:
+        with OutputSet() as out:
+            out.add(target)
+            out.write_bytes(target, b"partial")
+            seen.append(_names(tmp_path))
+            raise RuntimeError
+
+    with pytest.raises(RuntimeError):
+        run()
+    assert seen == [[temp_name("x.mcap")]]
     assert _names(tmp_path) == []
     with OutputSet() as out:
         out.add(target)
