@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import logging.handlers
 import math
 import os
 import sys
@@ -105,15 +106,26 @@ class _Main(click.Group):
         sys.exit(code)
 
 
-def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
-    """Python warnings (numpy overflow on absurd input…) as one line each, on success only.
+_HELD_LOG = logging.handlers.MemoryHandler(capacity=10_000, flushLevel=logging.CRITICAL + 1)
+"""Warnings of a run, held until it ends: printed if it succeeds, dropped if it fails."""
 
-    A failed run says what went wrong in its one ERROR line; the warnings add nothing.
+
+def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
+    """Logged and Python warnings (numpy overflow…) as one line each, on success only.
+
+    A failed run says what went wrong in its one ERROR line on stderr, and nothing else.
     """
     if not ok:
+        _HELD_LOG.acquire()
+        try:
+            _HELD_LOG.buffer.clear()
+        finally:
+            _HELD_LOG.release()
         return
     for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
         logging.getLogger("camtraj").warning("%s", text)
+    with contextlib.suppress(OSError, ValueError):
+        _HELD_LOG.flush()
 
 
 def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
@@ -141,7 +153,10 @@ def main() -> None:
     Units: metres and degrees on the command line; metres and radians in files.
     Exit codes: 0 ok, 2 bad input or usage, 3 the shot cannot be done as asked.
     """
-    logging.basicConfig(format="warning: %(message)s", level=logging.WARNING)
+    stderr = logging.StreamHandler()
+    stderr.setFormatter(logging.Formatter("warning: %(message)s"))
+    _HELD_LOG.setTarget(stderr)
+    logging.basicConfig(handlers=[_HELD_LOG], level=logging.WARNING, force=True)
 
 
 @main.command()

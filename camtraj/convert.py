@@ -122,10 +122,16 @@ class Analysis:
 
 MAX_DISTANCE_M = 1.0e6
 """Farthest a camera may be from the stage origin [m]; beyond is a unit or export error."""
+MAX_FPS = 100_000.0
+"""Highest film frame rate [frames/s] a shot may have (USD falls back on it for time codes)."""
 
 
-def check_distances(shot: Shot) -> None:
-    """Refuse a camera farther than :data:`MAX_DISTANCE_M` from the stage origin."""
+def check_shot(shot: Shot) -> None:
+    """Refuse an absurd frame rate, or a camera farther than :data:`MAX_DISTANCE_M` out."""
+    if not shot.fps <= MAX_FPS:
+        msg = (f"{shot.source}: framesPerSecond {shot.fps:.6g} is more than {MAX_FPS:.0f}; "
+               "check the stage's framesPerSecond and timeCodesPerSecond")
+        raise ShotFileError(msg)
     dist = np.abs(shot.cam2world[:, :3, 3]).max(axis=1)  # no overflow, unlike a norm
     far = np.flatnonzero(~(dist <= MAX_DISTANCE_M))
     if far.size:
@@ -183,7 +189,7 @@ def analyse(
         except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
             msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
             raise ShotFileError(msg) from None
-        check_distances(shot)
+        check_shot(shot)
         if shot.frames.shape[0] < 2:
             msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
             raise InputError(msg)
