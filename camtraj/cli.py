@@ -40,14 +40,18 @@ def _options(kw: dict[str, Any]) -> ConvertOptions:
     return build_options(**kw)
 
 
-def stopped(exc: KeyboardInterrupt) -> NoReturn:
-    """One line and exit 128 + signal (130 for Ctrl-C) for a run stopped by a signal."""
+def stopped(exc: KeyboardInterrupt, command: str | None = None) -> NoReturn:
+    """One line and exit 128 + signal (130 for Ctrl-C) for a run stopped by a signal.
+
+    ``convert`` and ``check`` write nothing then; a ``batch`` keeps the shots it finished.
+    """
     if isinstance(exc, interrupts.Interrupted):
         name, code = exc.signal_name, exc.exit_code
     else:
         name, code = "SIGINT", 130
+    what = "" if command not in (None, "convert", "check", "info") else "; nothing was written"
     with contextlib.suppress(OSError, ValueError):
-        click.echo(f"ERROR: stopped by {name}; nothing was written", err=True)
+        click.echo(f"ERROR: stopped by {name}{what}", err=True)
     sys.exit(code)
 
 
@@ -69,7 +73,7 @@ class _Main(click.Group):
                     _pass_on_warnings(caught, ok)
             sys.stdout.flush()
         except KeyboardInterrupt as exc:
-            stopped(exc)
+            stopped(exc, ctx.invoked_subcommand)
         except OSError as exc:  # stdout is a full disk, /dev/full or a closed pipe
             _stdout_failed(exc)
         return result

@@ -25,6 +25,7 @@ import os
 import random
 import re
 import shutil
+import stat
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -292,6 +293,13 @@ def _corpus(base: Path) -> tuple[dict[str, Case], Path]:
     for name, (path, must, codes) in _write_usd_cases(inputs).items():
         named = (re.escape(path.name),) if codes == (2,) else ()  # exit 3 names frames instead
         convert(f"usd_{name}", path, must=(*named, *must), codes=codes)
+    # outputs are checked before the solve: an unreachable shot (exit 3 after its IK) with
+    # a bad output path gives the output's exit 2 instead
+    add("o_folder_missing_checked_before_the_solve",
+        ["convert", SHOTS / "unreachable.usda", "-o", "no_such_folder/x.mcap"], "does not exist")
+    add("summary_device_checked_before_the_solve",
+        ["convert", SHOTS / "unreachable.usda", "-o", "out.mcap", "--summary", "/dev/full"],
+        "character device")
     convert("whip_pan_shot_timing", SHOTS / "whip_pan.usda", "--timing", "shot",
             must=("velocity|acceleration|jerk",), codes=(3,))
     convert("unreachable_sample", SHOTS / "unreachable.usda", must=("cannot be reached",),
@@ -496,12 +504,16 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
                      "stdout": case.stdout or str(base / f"{name}.stdout"),
                      "stderr": str(base / f"{name}.stderr"), "fsize": case.fsize})
     before_inputs = _snapshot(inputs)
+    devices = {d: os.stat(d) for d in ("/dev/null", "/dev/full")}
     half = [jobs[0::2], jobs[1::2]]
     with ThreadPoolExecutor(2) as pool:
         codes: dict[str, int] = {}
         for part in pool.map(_serve, half):
             codes.update(part)
     assert _snapshot(inputs) == before_inputs, "an input changed"
+    for device, st in devices.items():  # never replaced by a regular file (we may be root)
+        now = os.stat(device)
+        assert stat.S_ISCHR(now.st_mode) and now.st_rdev == st.st_rdev, device
     results = {}
     for name, case in cases.items():
         out_path = Path(case.stdout) if case.stdout else base / f"{name}.stdout"
@@ -555,3 +567,47 @@ def test_the_forked_runs_match_real_processes(corpus: dict[str, Result], tmp_pat
         shutil.copytree(r.folder, folder)
         proc = run_cli(*r.case.args, cwd=folder)
         assert (proc.returncode, proc.stderr) == (r.rc, r.stderr), name
+
+
+# --------------------------------------------------------------------------------------------
+# A still camera is a valid shot (its speed is unbounded)
+# --------------------------------------------------------------------------------------------
+
+
+def _still_shot(path: Path, drift_m: float) -> Path:
+    """A camera that holds its pose (drifting ``drift_m`` in all) while the lens zooms."""
+    stage = _stage(path)
+    cam = _camera(stage, move=drift_m)
+    cam.GetFocalLengthAttr().Set(0.5, 1)  # tenths of a metre: 50 mm, then 35 mm
+    cam.GetFocalLengthAttr().Set(0.35, 24)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_still_camera_converts_and_reports_unbounded_speed(tmp_path: Path) -> None:
+    shot = _still_shot(tmp_path / "still.usda", 0.0)
+    out, summary = tmp_path / "still.mcap", tmp_path / "still.json"
+    proc = run_cli("convert", shot, "-o", out, "--summary", summary)
+    assert proc.returncode == 0, proc.stderr
+    assert "maximum feasible speed unbounded (the camera pose never changes)" in proc.stdout
+    data = json.loads(summary.read_text(), parse_constant=_no_constant)
+    assert data["max_speed"] is None and data["feasible_fps"] is None
+    assert out.stat().st_size > 0
+    check = run_cli("check", shot, "--json")
+    assert check.returncode == 0, check.stderr
+    data = json.loads(check.stdout, parse_constant=_no_constant)  # strict: no Infinity/NaN
+    assert data["max_speed"] is None
+
+
+def test_nearly_still_camera_caps_the_speed_shown(tmp_path: Path) -> None:
+    shot = _still_shot(tmp_path / "nearly.usda", 1e-9)
+    proc = run_cli("check", shot)
+    assert proc.returncode == 0, proc.stderr
+    line = next(x for x in proc.stdout.splitlines() if "maximum feasible speed" in x)
+    assert ">10000% of real time" in line, line
+    assert max(int(n) for n in re.findall(r"\d+", line)) <= 10000 * 24, line
+
+
+def _no_constant(name: str) -> None:
+    msg = f"{name} is not JSON"
+    raise ValueError(msg)

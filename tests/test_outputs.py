@@ -232,3 +232,15 @@ except InputError as exc:
     assert "cannot write -o" in proc.stdout and "too large" in proc.stdout
     assert target.read_bytes() == OLD_A
     assert _names(tmp_path) == ["x.mcap"]
+
+
+def test_batch_removes_stale_temporary_files_in_its_folder(tmp_path: Path) -> None:
+    from camtraj.batch import REPORT_NAME, run_batch
+    from camtraj.options import ConvertOptions
+
+    host = temp_name("x").split(TEMP_MARK)[1].rsplit("-", 1)[0]
+    stale = tmp_path / f".a.mcap{TEMP_MARK}{host}-{_dead_pid()}"
+    stale.write_bytes(b"partial take of a cancelled task")
+    report = run_batch([str(tmp_path / "missing.usda")], tmp_path, options=ConvertOptions())
+    assert report.exit_code == 2
+    assert _names(tmp_path) == [REPORT_NAME]
