@@ -33,7 +33,6 @@ import json
 import math
 import multiprocessing
 import os
-import secrets
 import sys
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -43,7 +42,7 @@ from typing import Any, Literal
 
 import click
 
-from camtraj import __version__
+from camtraj import __version__, jsonsafe
 from camtraj.errors import CamtrajError, InputError
 from camtraj.options import (
     ConvertOptions,
@@ -52,6 +51,7 @@ from camtraj.options import (
     more_convert_options,
     options_to_json,
 )
+from camtraj.outputs import OutputSet, remove_stale_temps
 
 __all__ = [
     "REPORT_NAME",
@@ -86,23 +86,23 @@ Status = Literal["ok", "failed", "skipped"]
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Write ``text`` to ``path`` atomically (:class:`camtraj.outputs.OutputSet`).
+
+    Creates missing folders. Raises InputError when it cannot be written.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    # Mode 0o666 less the umask, like any new file (mkstemp would make it private).
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with OutputSet() as outputs:
+        outputs.add(path)
+        outputs.write_bytes(path, text.encode("utf-8"))
+        outputs.commit()
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as indented JSON (with a final newline) to ``path`` atomically."""
-    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+    """Write ``data`` as indented JSON (with a final newline) to ``path`` atomically.
+
+    Numbers that are not finite are written as null (:mod:`camtraj.jsonsafe`).
+    """
+    write_text_atomic(path, jsonsafe.dumps(data) + "\n")
 
 
 def output_names(shots: Sequence[str], outdir: Path) -> list[tuple[Path, Path]]:
@@ -316,9 +316,10 @@ def _convert_one(
     try:
         from camtraj.convert import convert
 
-        summary = convert(shot, output, options, progress=False)
-        # Recorded so that a later batch with other options does not skip this shot.
-        write_json_atomic(Path(summary_path), {**summary, OPTIONS_KEY: options_to_json(options)})
+        # The options are recorded so that a later batch with other options does not skip
+        # this shot.
+        summary = convert(shot, output, options, progress=False, summary_path=summary_path,
+                          summary_extra={OPTIONS_KEY: options_to_json(options)})
     except CamtrajError as exc:
         outcome: dict[str, Any] = {
             "status": "failed",
@@ -461,6 +462,7 @@ def run_batch(
         msg = f"jobs must be at least 1, got {jobs}"
         raise InputError(msg)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(out)
 
     extra_inputs = [Path(p) for p in (options.robot, options.set_file) if p is not None]
     wanted = json.loads(json.dumps(options_to_json(options)))  # as read back from a summary

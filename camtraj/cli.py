@@ -6,17 +6,21 @@ Errors are printed as one ``ERROR:`` line naming the frames, axes and margins; n
 
 from __future__ import annotations
 
-import json
+import contextlib
 import logging
+import logging.handlers
 import math
+import os
 import sys
+import warnings
 from typing import Any, NoReturn
 
 import click
 
 import camtraj
-from camtraj.batch import batch_command, write_json_atomic
-from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
+from camtraj import interrupts, jsonsafe
+from camtraj.batch import batch_command
+from camtraj.errors import CamtrajError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -36,7 +40,110 @@ def _options(kw: dict[str, Any]) -> ConvertOptions:
     return build_options(**kw)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+def stopped(exc: KeyboardInterrupt, command: str | None = None) -> NoReturn:
+    """One line and exit 128 + signal (130 for Ctrl-C) for a run stopped by a signal.
+
+    ``convert`` and ``check`` write nothing then; a ``batch`` keeps the shots it finished.
+    """
+    if isinstance(exc, interrupts.Interrupted):
+        name, code = exc.signal_name, exc.exit_code
+    else:
+        name, code = "SIGINT", 130
+    what = "" if command not in (None, "convert", "check", "info") else "; nothing was written"
+    with contextlib.suppress(OSError, ValueError):
+        click.echo(f"ERROR: stopped by {name}{what}", err=True)
+    sys.exit(code)
+
+
+class _Main(click.Group):
+    """The ``camtraj`` group: a stop by signal or a failing standard output is one line."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        ok = False
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("default")
+                try:
+                    result = super().invoke(ctx)
+                    ok = True
+                except SystemExit as exc:
+                    ok = exc.code in (0, None)
+                    raise
+                finally:
+                    _pass_on_warnings(caught, ok)
+            sys.stdout.flush()
+        except KeyboardInterrupt as exc:
+            stopped(exc, ctx.invoked_subcommand)
+        except OSError as exc:  # stdout is a full disk, /dev/full or a closed pipe
+            _stdout_failed(exc)
+        return result
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        if not kwargs.get("standalone_mode", True):
+            return super().main(*args, **kwargs)
+        kwargs["standalone_mode"] = False
+        code: Any = 0
+        try:
+            rv = super().main(*args, **kwargs)
+            code = rv if isinstance(rv, int) else 0
+        except SystemExit as exc:
+            code = exc.code
+        except click.exceptions.Abort as exc:
+            cause = exc.__cause__ or exc.__context__
+            stopped(cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt())
+        except KeyboardInterrupt as exc:
+            stopped(exc)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()
+            code = exc.exit_code
+        except click.ClickException as exc:  # usage errors: one line, like every error
+            hint = ""
+            ctx = getattr(exc, "ctx", None)
+            if isinstance(exc, click.UsageError) and ctx is not None:
+                hint = f" (see '{ctx.command_path} --help')"
+            click.echo(f"ERROR: {' '.join(exc.format_message().split())}{hint}", err=True)
+            code = exc.exit_code
+        try:
+            sys.stdout.flush()
+        except OSError as err:
+            _stdout_failed(err, code)
+        sys.exit(code)
+
+
+_HELD_LOG = logging.handlers.MemoryHandler(capacity=10_000, flushLevel=logging.CRITICAL + 1)
+"""Warnings of a run, held until it ends: printed if it succeeds, dropped if it fails."""
+
+
+def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
+    """Logged and Python warnings (numpy overflow…) as one line each, on success only.
+
+    A failed run says what went wrong in its one ERROR line on stderr, and nothing else.
+    """
+    if not ok:
+        _HELD_LOG.acquire()
+        try:
+            _HELD_LOG.buffer.clear()
+        finally:
+            _HELD_LOG.release()
+        return
+    for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
+        logging.getLogger("camtraj").warning("%s", text)
+    with contextlib.suppress(OSError, ValueError):
+        _HELD_LOG.flush()
+
+
+def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
+    with contextlib.suppress(OSError, ValueError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())  # what is still buffered goes nowhere, quietly
+        reason = exc.strerror or str(exc)
+        click.echo(f"ERROR: cannot write to standard output: {reason[:1].lower()}{reason[1:]}",
+                   err=True)
+    sys.exit(code if isinstance(code, int) and code != 0 else EXIT_INPUT)
+
+
+@click.group(cls=_Main,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(camtraj.__version__, prog_name="camtraj")
 def main() -> None:
     """Turn a previs USD camera move into a motion-control camera robot move.
@@ -50,7 +157,10 @@ def main() -> None:
     Units: metres and degrees on the command line; metres and radians in files.
     Exit codes: 0 ok, 2 bad input or usage, 3 the shot cannot be done as asked.
     """
-    logging.basicConfig(format="warning: %(message)s", level=logging.WARNING)
+    stderr = logging.StreamHandler()
+    stderr.setFormatter(logging.Formatter("warning: %(message)s"))
+    _HELD_LOG.setTarget(stderr)
+    logging.basicConfig(handlers=[_HELD_LOG], level=logging.WARNING, force=True)
 
 
 @main.command()
@@ -69,19 +179,12 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
-    from camtraj.convert import convert as run
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from camtraj.convert import convert as run
 
     try:
-        if summary is not None:
-            _check_writable(summary, "--summary")
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
-        if summary is not None:
-            try:
-                write_json_atomic(_path(summary), result)
-            except OSError as exc:
-                _path(output).unlink(missing_ok=True)  # all or nothing
-                msg = f"cannot write {summary}: {exc.strerror or exc}"
-                raise InputError(msg) from exc
+        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
+                     summary_path=summary)
     except CamtrajError as exc:
         _fail(exc)
     if not quiet:
@@ -100,8 +203,9 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
     and the run-up / run-out extents. Exit code 3 when the shot cannot be done as asked.
     """
-    from camtraj.convert import convert as run
-    from camtraj.timing import TimingLimitError
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from camtraj.convert import convert as run
+        from camtraj.timing import TimingLimitError
 
     options = None
     try:
@@ -114,7 +218,7 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     except CamtrajError as exc:
         _fail(exc)
     if as_json:
-        click.echo(json.dumps(result, indent=2, sort_keys=True, default=_json_default))
+        click.echo(jsonsafe.dumps(result, sort_keys=True))
     else:
         click.echo(_report(result))
     sys.exit(EXIT_OK if result["status"] == "ok" else EXIT_INFEASIBLE)
@@ -132,7 +236,7 @@ def info(mcap_file: str, as_json: bool) -> None:
     except CamtrajError as exc:
         _fail(exc)
     if as_json:
-        click.echo(json.dumps(d, indent=2, sort_keys=True, default=_json_default))
+        click.echo(jsonsafe.dumps(d, sort_keys=True))
         return
     meta = d.get("metadata") or {}
     fr = d.get("frames") or {}
@@ -175,29 +279,6 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 # ---------------------------------------------------------------------------------------------
 
 
-def _check_writable(path: str, option: str) -> None:
-    """Fail early (exit 2) when the folder of an output file does not exist."""
-    folder = _path(path).parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        msg = f"cannot write {option} {path}: folder {folder} {what}"
-        raise InputError(msg)
-
-
-def _path(p: str) -> Any:
-    from pathlib import Path
-
-    return Path(p)
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return str(obj)
-    return str(obj)
-
-
 def _unreachable_report(shot: str, exc: UnreachableFramesError) -> dict[str, Any]:
     return {
         "status": "unreachable",
@@ -233,12 +314,26 @@ def _floor(x: float, digits: int) -> str:
     return f"{math.floor(x * scale) / scale:.{digits}f}"
 
 
-def _floor_pct(x: float) -> int:
-    return math.floor(100.0 * x)
+MAX_SHOWN_SPEED = 100.0
+"""Above this many times real time the report says ">10000%" (the number means nothing)."""
+
+
+def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
+    """'131% of real time (… 31.54 fps)'; a still camera's speed is unbounded (JSON: null)."""
+    if max_speed is None or not math.isfinite(max_speed):
+        return "unbounded (the camera pose never changes)"
+    if max_speed > MAX_SHOWN_SPEED:
+        return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
+                f"{_floor(MAX_SHOWN_SPEED * fps, 0)} fps)")
+    shown = feasible_fps if feasible_fps is not None else max_speed * fps
+    return (f"{math.floor(100.0 * max_speed)}% of real time "
+            f"(could be shot at {_floor(shown, 2)} fps)")
 
 
 def _pct(x: float) -> str:
-    return "   -" if not math.isfinite(x) else f"{100 * x:4.0f}%"
+    if not math.isfinite(x):
+        return "   -"
+    return f"{100 * x:4.0f}%" if x < 100.0 else ">9999%"
 
 
 def _report(r: dict[str, Any]) -> str:
@@ -253,9 +348,11 @@ def _report(r: dict[str, Any]) -> str:
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
-        if math.isfinite(r["max_speed"]):
-            lines.append(f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
-                         f"(shoot at {_floor(r['feasible_fps'], 2)} fps); try --timing scale")
+        speed = r["max_speed"]
+        if speed is not None and math.isfinite(speed):
+            fps = r["feasible_fps"] / speed if speed > 0 else math.nan
+            lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
+                         "; try --timing scale")
         return "\n".join(lines)
     fr = r["frames"]
     lines = [
@@ -264,8 +361,7 @@ def _report(r: dict[str, Any]) -> str:
         f"  timing {r['timing']}: take {r['duration']:.2f} s (shot {r['shot_start']:.2f}-"
         f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
-        f"  maximum feasible speed {_floor_pct(r['max_speed'])}% of real time "
-        f"(could be shot at {_floor(r['feasible_fps'], 2)} fps)",
+        f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   run-up   run-out (extent)"
         "   margin  to start",
     ]

@@ -11,7 +11,7 @@ import json
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,10 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 import camtraj
-from camtraj.errors import InputError
+from camtraj import jsonsafe
+from camtraj.errors import InputError, ShotFileError
 from camtraj.ik import PathSolution, solve_path_report
-from camtraj.mcap_io import TakeData, write_take
+from camtraj.inputs import require_regular_files, run_inputs
+from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
+from camtraj.outputs import OutputSet
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
@@ -117,6 +120,28 @@ class Analysis:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+MAX_DISTANCE_M = 1.0e6
+"""Farthest a camera may be from the stage origin [m]; beyond is a unit or export error."""
+MAX_FPS = 100_000.0
+"""Highest film frame rate [frames/s] a shot may have (USD falls back on it for time codes)."""
+
+
+def check_shot(shot: Shot) -> None:
+    """Refuse an absurd frame rate, or a camera farther than :data:`MAX_DISTANCE_M` out."""
+    if not shot.fps <= MAX_FPS:
+        msg = (f"{shot.source}: framesPerSecond {shot.fps:.6g} is more than {MAX_FPS:.0f}; "
+               "check the stage's framesPerSecond and timeCodesPerSecond")
+        raise ShotFileError(msg)
+    dist = np.abs(shot.cam2world[:, :3, 3]).max(axis=1)  # no overflow, unlike a norm
+    far = np.flatnonzero(~(dist <= MAX_DISTANCE_M))
+    if far.size:
+        i = int(far[0])
+        msg = (f"{shot.source}: the camera is {dist[i]:.3g} m out from the stage origin at frame "
+               f"{int(shot.frames[i])}, more than {MAX_DISTANCE_M:.0f} m "
+               f"(metersPerUnit {shot.meters_per_unit:g}); check the stage units")
+        raise ShotFileError(msg)
+
+
 def load_robot(options: ConvertOptions) -> Robot:
     return Robot.default() if options.robot is None else Robot.from_toml(options.robot)
 
@@ -156,9 +181,15 @@ def analyse(
     """
     timings: dict[str, float] = {}
     with _stage(timings, "read"):
+        require_regular_files(shot_path, options)
         robot = load_robot(options)
         placement = load_placement(options)
-        shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+        try:
+            shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+        except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
+            msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
+            raise ShotFileError(msg) from None
+        check_shot(shot)
         if shot.frames.shape[0] < 2:
             msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
             raise InputError(msg)
@@ -187,24 +218,43 @@ def convert(
     options: ConvertOptions | None = None,
     *,
     progress: bool = False,
+    summary_path: str | Path | None = None,
+    summary_extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
-    With ``output_path`` None nothing is written (``camtraj check``). Raises ``InputError``
-    (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
-    run writes nothing and leaves an existing output untouched.
+    With ``output_path`` None nothing is written (``camtraj check``). With ``summary_path``
+    the summary (plus ``summary_extra``) is written there as JSON; the MCAP and the summary
+    are one result: both are replaced or neither is. Every output path is checked before the
+    solve (its folder, that it is a regular file or nothing, that it is no input and not the
+    other output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
+    frames, axes and margins named; a failed or interrupted run writes nothing and leaves
+    existing outputs untouched.
     """
     options = options or ConvertOptions()
-    bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
-    try:
-        analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
-    finally:
-        bar.close()
-    if output_path is not None:
-        with _stage(analysis.timings, "write"):
-            write_take(output_path, take_data(analysis), analysis.robot,
-                       metadata(analysis, shot_path, options))
-    return summary(analysis, shot_path, output_path, options)
+    with OutputSet() as outputs:
+        if output_path is not None:
+            outputs.add(output_path, "-o")
+        if summary_path is not None:
+            outputs.add(summary_path, "--summary")
+        if outputs.paths:
+            require_regular_files(shot_path, options)
+            outputs.refuse_inputs(run_inputs(shot_path, options))
+        bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
+        try:
+            analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
+        finally:
+            bar.close()
+        if output_path is not None:
+            with _stage(analysis.timings, "write"), outputs.open(output_path) as stream:
+                write_take_to(stream, take_data(analysis), analysis.robot,
+                              metadata(analysis, shot_path, options))
+        result = summary(analysis, shot_path, output_path, options)
+        if summary_path is not None:
+            text = jsonsafe.dumps({**result, **(summary_extra or {})}) + "\n"
+            outputs.write_bytes(summary_path, text.encode("utf-8"))
+        outputs.commit()
+    return result
 
 
 def take_data(analysis: Analysis) -> TakeData:

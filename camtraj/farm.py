@@ -514,13 +514,13 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
     )
     Path(output).parent.mkdir(parents=True, exist_ok=True)
-    try:
-        result: dict[str, Any] = convert(shot, output, options, progress=False)
+    try:  # the MCAP and the summary are one result (written together or not at all)
+        result: dict[str, Any] = convert(shot, output, options, progress=False,
+                                         summary_path=summary)
     except CamtrajError:
         Path(output).unlink(missing_ok=True)
         Path(summary).unlink(missing_ok=True)
         raise
-    write_json_atomic(Path(summary), result)
     return result
 
 

@@ -21,10 +21,8 @@ tests check the bytes against mcap_ros2's encoder.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import os
 import re
 import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -637,32 +635,12 @@ def _reason(exc: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
-def _open_temp(path: Path) -> IO[bytes]:
-    """Open the temporary output file (a seam for tests)."""
-    return path.open("wb")
-
-
-def _fsync_dir(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def write_take(
     path: str | Path, take: TakeData, robot: Robot, metadata: Mapping[str, str]
 ) -> None:
-    """Write a take as a ROS 2 MCAP file, atomically.
+    """Write a take as a ROS 2 MCAP file, atomically (:class:`camtraj.outputs.OutputSet`).
 
-    The file is written to ``.<name>.tmp-<pid>`` in the destination folder, flushed and
-    fsynced, then renamed over ``path``; on any error the temporary file is removed and an
-    existing file at ``path`` is left as it was.
+    On any error nothing is left behind and an existing file at ``path`` stays as it was.
 
     Args:
         path: Destination ``.mcap`` file.
@@ -673,10 +651,23 @@ def write_take(
             speed_factor, tool_version).
 
     Raises:
-        InputError: The destination folder does not exist or cannot be written.
+        InputError: The destination cannot be written (missing folder, not a regular file,
+            permission, disk full).
         ValueError: The take does not match the robot (joint names).
     """
-    path = Path(path)
+    from camtraj.outputs import OutputSet
+
+    with OutputSet() as outputs:
+        outputs.add(path)
+        with outputs.open(path) as stream:
+            write_take_to(stream, take, robot, metadata)
+        outputs.commit()
+
+
+def write_take_to(
+    stream: IO[bytes], take: TakeData, robot: Robot, metadata: Mapping[str, str]
+) -> None:
+    """Write a take as a ROS 2 MCAP file into an open binary stream (see :func:`write_take`)."""
     if tuple(take.joint_names) != tuple(robot.joint_names):
         msg = (
             f"take joint names {list(take.joint_names)} differ from the robot's "
@@ -687,41 +678,8 @@ def write_take(
         if not isinstance(key, str) or not isinstance(value, str):
             msg = f"metadata must map strings to strings; got {key!r}: {value!r}"
             raise TypeError(msg)
-    folder = path.parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        msg = f"cannot write {path}: folder {folder} {what}"
-        raise InputError(msg)
-    if path.is_dir():
-        msg = f"cannot write {path}: it is a folder"
-        raise InputError(msg)
-
     records = _build_records(take, robot)
-    tmp = folder / f".{path.name}.tmp-{os.getpid()}"
-    try:
-        try:
-            stream = _open_temp(tmp)
-        except OSError as exc:
-            msg = f"cannot write {path}: {_reason(exc)}"
-            raise InputError(msg) from exc
-        with stream:
-            _write_mcap(stream, records, dict(metadata), _robot_metadata(robot))
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        _remove_quietly(tmp)
-        msg = f"cannot write {path}: {_reason(exc)}"
-        raise InputError(msg) from exc
-    except BaseException:
-        _remove_quietly(tmp)
-        raise
-    _fsync_dir(folder)
-
-
-def _remove_quietly(path: Path) -> None:
-    with contextlib.suppress(OSError):
-        path.unlink()
+    _write_mcap(stream, records, dict(metadata), _robot_metadata(robot))
 
 
 @dataclass(frozen=True)

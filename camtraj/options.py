@@ -74,8 +74,8 @@ def _parse_placement(text: str) -> tuple[float, float, float, float]:
         values = tuple(float(p) for p in parts)
     except ValueError:
         values = ()
-    if len(values) != 4:
-        msg = f"placement must be x,y,z,yaw_deg (4 numbers), got {text!r}"
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        msg = f"placement must be x,y,z,yaw_deg (4 finite numbers), got {text!r}"
         raise InputError(msg)
     return (values[0], values[1], values[2], values[3])
 

@@ -55,6 +55,8 @@ _CRATE_MAGIC = b"PXR-USDC"
 _TEXT_MAGIC = b"#usda"
 _ZIP_MAGIC = b"PK\x03\x04"
 _SUPPORTED_UP_AXES = ("Y", "Z")
+MAX_FRAMES = 1_000_000
+"""Most frames a shot may have (11.5 hours at 24 fps); more is a broken time range or rate."""
 # Relative tolerance on singular values: below this the camera transform has (nearly) zero scale.
 _DEGENERATE_SCALE = 1e-9
 
@@ -438,7 +440,15 @@ def _time_codes(
             )
             raise ShotFileError(msg)
 
-    n = math.floor((last - first) / step + 1e-9) + 1
+    steps = (last - first) / step
+    if not steps < MAX_FRAMES:  # also inf and NaN
+        msg = (
+            f"{path}: time codes {first:.10g}-{last:.10g} at {step:.3g} time codes per frame "
+            f"give {steps + 1:.3g} frames, more than camtraj's maximum of {MAX_FRAMES:,}; "
+            "check startTimeCode, endTimeCode and framesPerSecond, or give --frames"
+        )
+        raise ShotFileError(msg)
+    n = math.floor(steps + 1e-9) + 1
     return first + step * np.arange(n, dtype=np.float64)
 
 

@@ -1,0 +1,613 @@
+"""A corpus of bad inputs (issue 8, acceptance): each run exits 2 or 3 with one line on stderr.
+
+Every case is generated here (no committed binaries): broken and hostile USD files, stages
+authored with pxr the way a broken exporter might write them, bad options, robot and set
+files, and output paths that would destroy an input or cannot take a file. Each case runs
+``camtraj convert`` (or ``check``) in a fresh process over an existing good result (a real
+MCAP and summary from an earlier run) and must:
+
+* exit 2 (bad input) or 3 (cannot be done as asked);
+* print exactly one line on stderr, ``ERROR: ...``, and no traceback or warning;
+* leave the earlier outputs byte-identical, create nothing at a new output path, leave no
+  temporary file, and change no input.
+
+The runs are many, so they are forked from a pre-imported server process: each case is a
+new process running the real command line (``camtraj.__main__.run``) with its own stdout
+and stderr files, exactly as the installed ``camtraj`` command; a sample of cases also runs
+as ``python -m camtraj`` to show that both agree.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import re
+import shutil
+import stat
+import subprocess
+import sys
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom
+
+from tests.test_convert import ROOT, SHOTS, run_cli
+
+MAYA = SHOTS / "maya_dolly_push_in.usda"
+ROBOT_TOML = ROOT / "camtraj" / "data" / "robot.toml"
+MIN_CASES = 150
+
+SERVER = r"""
+import json, os, resource, sys, traceback
+import camtraj.cli, camtraj.convert  # import the pipeline (numpy, scipy, USD) once
+from camtraj.__main__ import run
+
+for line in sys.stdin:
+    job = json.loads(line)
+    sys.stdout.flush()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.chdir(job["cwd"])
+            null = os.open(os.devnull, os.O_RDONLY)
+            out = os.open(job["stdout"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            err = os.open(job["stderr"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            os.dup2(null, 0); os.dup2(out, 1); os.dup2(err, 2)
+            if job.get("fsize"):
+                resource.setrlimit(resource.RLIMIT_FSIZE, (job["fsize"], job["fsize"]))
+            sys.argv = ["camtraj", *job["args"]]
+            run()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        except BaseException:
+            traceback.print_exc()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except BaseException:
+                pass
+        os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    print(json.dumps({"id": job["id"], "rc": os.waitstatus_to_exitcode(status)}), flush=True)
+"""
+
+
+@dataclass
+class Case:
+    """One bad run.
+
+    Attributes:
+        args: The command line after ``camtraj``.
+        must: Regular expressions the error line must match (case-insensitive).
+        codes: The allowed exit codes.
+        stdout: Where stdout goes (default a file in the case folder).
+        fsize: A file size limit in bytes for the run (a disk that fills up).
+        new_outputs: Output paths that did not exist and must still not exist.
+    """
+
+    args: list[str]
+    must: tuple[str, ...] = ()
+    codes: tuple[int, ...] = (2,)
+    stdout: str | None = None
+    fsize: int | None = None
+    new_outputs: list[Path] = field(default_factory=list)
+
+
+# --------------------------------------------------------------------------------------------
+# Generating the inputs
+# --------------------------------------------------------------------------------------------
+
+
+def _stage(path: Path, *, start: float = 1, end: float = 24, fps: float | None = None,
+           tcps: float | None = None, mpu: float | None = 1.0, up: str | None = "Z") -> Usd.Stage:
+    stage = Usd.Stage.CreateNew(str(path))
+    if mpu is not None:
+        stage.SetMetadata("metersPerUnit", mpu)
+    if up is not None:
+        stage.SetMetadata("upAxis", up)
+    stage.SetStartTimeCode(start)
+    stage.SetEndTimeCode(end)
+    if tcps is not None:
+        stage.SetMetadata("timeCodesPerSecond", tcps)
+    if fps is not None:
+        stage.SetMetadata("framesPerSecond", fps)
+    return stage
+
+
+def _camera(stage: Usd.Stage, *, at: tuple[float, float, float] = (4.0, 0.0, 1.0),
+            move: float = 0.5, parent: str = "/rig", path: str = "cam") -> UsdGeom.Camera:
+    UsdGeom.Xform.Define(stage, parent)
+    cam = UsdGeom.Camera.Define(stage, f"{parent}/{path}")
+    translate = cam.AddTranslateOp()
+    cam.AddRotateXYZOp().Set(Gf.Vec3f(90.0, 0.0, -90.0))  # looks down +x, the track
+    for f in (1, 24):
+        translate.Set(Gf.Vec3d(at[0] + move * (f - 1) / 23, at[1], at[2]), f)
+    return cam
+
+
+def _write_usd_cases(d: Path) -> dict[str, tuple[Path, tuple[str, ...], tuple[int, ...]]]:
+    """Shots authored with pxr: name -> (path, patterns, exit codes)."""
+    out: dict[str, tuple[Path, tuple[str, ...], tuple[int, ...]]] = {}
+
+    def save(name: str, stage: Usd.Stage, *must: str, codes: tuple[int, ...] = (2,)) -> None:
+        stage.GetRootLayer().Save()
+        out[name] = (Path(stage.GetRootLayer().realPath), must, codes)
+
+    s = _stage(d / "no_camera.usda")
+    UsdGeom.Xform.Define(s, "/World")
+    save("no_camera", s, "no camera")
+    s = _stage(d / "two_cameras.usda")
+    _camera(s)
+    _camera(s, path="cam2")
+    save("two_cameras", s, r"2 cameras", "/rig/cam2")
+    layer = Sdf.Layer.CreateNew(str(d / "not_animated.usda"))
+    stage = Usd.Stage.Open(layer)
+    stage.SetMetadata("metersPerUnit", 1.0)
+    UsdGeom.Camera.Define(stage, "/cam")
+    save("not_animated", stage, "no frame range")
+
+    for name, value in (("nan", math.nan), ("inf", math.inf), ("far", 1.0e300),
+                        ("beyond_1000km", 2.0e6)):
+        s = _stage(d / f"translate_{name}.usda")
+        cam = _camera(s)
+        cam.GetOrderedXformOps()[0].Set(Gf.Vec3d(value, 0.0, 1.0), 12)
+        save(f"translate_{name}", s, r"frame \d+")
+    for name, scale in (("mirrored", (-1.0, 1.0, 1.0)), ("zero", (0.0, 0.0, 0.0)),
+                        ("tiny_1e-300", (1e-300, 1e-300, 1e-300)),
+                        ("flat", (1.0, 1.0, 0.0))):
+        s = _stage(d / f"scale_{name}.usda")
+        _camera(s)
+        UsdGeom.Xform(s.GetPrimAtPath("/rig")).AddScaleOp().Set(Gf.Vec3d(*scale))
+        save(f"parent_scale_{name}", s, r"frame \d+")
+    s = _stage(d / "projective.usda")
+    _camera(s)
+    m = Gf.Matrix4d(1.0)
+    m.SetColumn(3, Gf.Vec4d(0.1, 0.0, 0.0, 1.0))
+    UsdGeom.Xform(s.GetPrimAtPath("/rig")).AddTransformOp().Set(m)
+    save("projective", s, "projective")
+
+    for name, kw, pattern in (
+        ("start_after_end", {"start": 30, "end": 1}, "after endTimeCode"),
+        ("range_1e300", {"end": 1e300}, "maximum of 1,000,000"),
+        ("range_2e6_frames", {"end": 2.0e6}, "maximum of 1,000,000"),
+        ("fps_1e12", {"fps": 1e12}, "framesPerSecond"),
+        ("fps_1e308", {"fps": 1e308}, "framesPerSecond"),
+        ("fps_1e12_tcps_24", {"fps": 1e12, "tcps": 24}, "maximum of 1,000,000"),
+        ("fps_zero", {"fps": 0.0}, "framesPerSecond"),
+        ("fps_negative", {"fps": -24.0}, "framesPerSecond"),
+        ("fps_nan", {"fps": math.nan}, "framesPerSecond"),
+        ("tcps_zero", {"tcps": 0.0}, "timeCodesPerSecond"),
+        ("tcps_inf", {"tcps": math.inf}, "timeCodesPerSecond"),
+        ("mpu_zero", {"mpu": 0.0}, "metersPerUnit"),
+        ("mpu_negative", {"mpu": -1.0}, "metersPerUnit"),
+        ("mpu_nan", {"mpu": math.nan}, "metersPerUnit"),
+        ("mpu_inf", {"mpu": math.inf}, "metersPerUnit"),
+        ("up_axis_x", {"up": "X"}, "upAxis"),
+        ("single_frame", {"start": 5, "end": 5}, "1 frame"),
+    ):
+        s = _stage(d / f"{name}.usda", **kw)  # type: ignore[arg-type]
+        _camera(s)
+        save(name, s, pattern)
+
+    for name, value in (("focal_nan", math.nan), ("focal_inf", math.inf)):
+        s = _stage(d / f"{name}.usda")
+        cam = _camera(s)
+        cam.GetFocalLengthAttr().Set(value, 10)
+        save(name, s, "focalLength")
+
+    s = _stage(d / "out_of_reach.usda")
+    _camera(s, at=(40.0, 30.0, 1.0))
+    save("out_of_reach", s, "cannot be reached", codes=(3,))
+    return out
+
+
+def _hostile_files(d: Path) -> dict[str, Path]:
+    """Files that are not USD, or are USD damaged in transit."""
+    rng = random.Random(8)
+    files: dict[str, Path] = {}
+
+    def put(name: str, data: bytes) -> None:
+        path = d / name
+        path.write_bytes(data)
+        files[path.stem] = path
+
+    for i in range(20):
+        size = rng.choice((1, 17, 256, 4096, 20000))
+        put(f"usda_header_then_random_{i}.usda", b"#usda 1.0\n" + rng.randbytes(size))
+    for i in range(5):
+        put(f"random_bytes_{i}.usd", rng.randbytes(rng.choice((3, 100, 5000))))
+    text = MAYA.read_bytes()
+    for i, frac in enumerate((0.02, 0.08, 0.15, 0.25, 0.33, 0.41, 0.5, 0.58, 0.66, 0.72, 0.8,
+                              0.86, 0.9, 0.95, 0.98)):
+        put(f"usda_truncated_{i}.usda", text[: int(len(text) * frac)])
+    Sdf.Layer.FindOrOpen(str(MAYA)).Export(str(d / "full.usdc"))
+    crate = (d / "full.usdc").read_bytes()
+    for i, frac in enumerate((0.0005, 0.01, 0.1, 0.2, 0.4, 0.5, 0.6, 0.8, 0.9, 0.97)):
+        put(f"usdc_truncated_{i}.usdc", crate[: max(9, int(len(crate) * frac))])
+    put("empty.usda", b"")
+    put("header_only.usda", b"#usda 1.0\n")
+    put("notes.usd", b"shot notes: dolly in, then hold\n")
+    put("zeros.usd", bytes(4096))
+    put("crate_magic_junk.usdc", b"PXR-USDC" + rng.randbytes(500))
+    put("zip_junk.usdz", b"PK\x03\x04" + rng.randbytes(500))
+    put("utf16.usda", "#usda 1.0\ndef Camera \"cam\" {}\n".encode("utf-16"))
+    return files
+
+
+def _robot_and_set_files(d: Path) -> dict[str, tuple[Path, str]]:
+    """name -> (file, pattern); robot files as --robot, set files as --set-file."""
+    text = ROBOT_TOML.read_text(encoding="utf-8")
+    files: dict[str, tuple[Path, str]] = {}
+
+    def put(name: str, content: str, pattern: str) -> None:
+        path = d / name
+        path.write_text(content, encoding="utf-8")
+        files[name] = (path, pattern)
+
+    put("robot_bad_toml.toml", "[robot\nname = 1\n", "TOML")
+    put("robot_missing_max_jerk.toml", text.replace("max_jerk = 15.0\n", "", 1), "max_jerk")
+    put("robot_elbow_out_of_range.toml", text.replace("min = -180.0", "min = -270.0", 1),
+        "elbow")
+    put("set_bad_toml.toml", "[placement\n", "TOML")
+    put("set_no_table.toml", "x = 1\n", r"\[placement\]")
+    put("set_unknown_key.toml", "[placement]\nx = 1\nheight = 2\n", "unknown key")
+    put("set_string_value.toml", '[placement]\nx = "one"\n', "finite number")
+    put("set_not_a_rotation.toml", "[placement]\nrotation = [[2,0,0],[0,1,0],[0,0,1]]\n",
+        "rotation")
+    put("set_yaw_and_rotation.toml",
+        "[placement]\nyaw_deg = 3\nrotation = [[1,0,0],[0,1,0],[0,0,1]]\n", "not both")
+    return files
+
+
+# --------------------------------------------------------------------------------------------
+# The corpus
+# --------------------------------------------------------------------------------------------
+
+
+def _corpus(base: Path) -> tuple[dict[str, Case], Path]:
+    inputs = base / "inputs"
+    inputs.mkdir()
+    cases: dict[str, Case] = {}
+    good = inputs / "maya.usda"
+    shutil.copy(MAYA, good)
+
+    def add(name: str, args: Sequence[object], *must: str, **kw: object) -> None:
+        assert name not in cases, name
+        cases[name] = Case([str(a) if not isinstance(a, str) else a for a in args], must,
+                           **kw)  # type: ignore[arg-type]
+
+    def convert(name: str, shot: object, *extra: object, must: tuple[str, ...] = (),
+                **kw: object) -> None:
+        add(name, ["convert", shot, "-o", "out.mcap", "--summary", "out.summary.json",
+                   *extra], *must, **kw)
+
+    for name, path in _hostile_files(inputs).items():
+        convert(name, path, must=(re.escape(path.name),))
+    for name, (path, must, codes) in _write_usd_cases(inputs).items():
+        named = (re.escape(path.name),) if codes == (2,) else ()  # exit 3 names frames instead
+        convert(f"usd_{name}", path, must=(*named, *must), codes=codes)
+    # outputs are checked before the solve: an unreachable shot (exit 3 after its IK) with
+    # a bad output path gives the output's exit 2 instead
+    add("o_folder_missing_checked_before_the_solve",
+        ["convert", SHOTS / "unreachable.usda", "-o", "no_such_folder/x.mcap"], "does not exist")
+    add("summary_device_checked_before_the_solve",
+        ["convert", SHOTS / "unreachable.usda", "-o", "out.mcap", "--summary", "/dev/full"],
+        "character device")
+    convert("whip_pan_shot_timing", SHOTS / "whip_pan.usda", "--timing", "shot",
+            must=("velocity|acceleration|jerk",), codes=(3,))
+    convert("unreachable_sample", SHOTS / "unreachable.usda", must=("cannot be reached",),
+            codes=(3,))
+
+    # The shot path itself
+    os.mkfifo(inputs / "pipe.usda")
+    (inputs / "folder.usda").mkdir()
+    os.symlink("loop_b.usda", inputs / "loop_a.usda")
+    os.symlink("loop_a.usda", inputs / "loop_b.usda")
+    bad_name = os.fsdecode(bytes(inputs) + b"/shot\xff\xfe.usda")
+    shutil.copy(MAYA, bad_name)
+    for name, shot, must in (
+        ("shot_missing", inputs / "missing.usda", "no such file"),
+        ("shot_fifo", inputs / "pipe.usda", "named pipe"),
+        ("shot_folder", inputs / "folder.usda", "folder|directory"),
+        ("shot_dev_null", "/dev/null", "character device"),
+        ("shot_dev_zero", "/dev/zero", "character device"),
+        ("shot_symlink_loop", inputs / "loop_a.usda", "loop_a"),
+        ("shot_name_not_utf8", bad_name, "not valid UTF-8"),
+        ("shot_name_not_utf8_missing", bad_name.replace("shot", "gone"), "gone"),
+    ):
+        convert(name, shot, must=(must,))
+
+    # Options
+    for name, extra, must in (
+        ("frames_backwards", ("--frames", "1100:1010"), "before the first"),
+        ("frames_outside", ("--frames", "1:5000"), "outside"),
+        ("frames_words", ("--frames", "start:end"), "A:B"),
+        ("frames_one_number", ("--frames", "1001"), "A:B"),
+        ("frames_float", ("--frames", "1001.5:1010"), "A:B"),
+        ("placement_two_numbers", ("--placement", "1,2"), "placement"),
+        ("placement_words", ("--placement", "a,b,c,d"), "placement"),
+        ("placement_nan", ("--placement", "nan,0,0,0"), "placement"),
+        ("placement_inf", ("--placement", "inf,0,0,0"), "placement"),
+        ("placement_far", ("--placement", "1e300,0,0,0"), "placement|reach|origin"),
+        ("rate_zero", ("--rate", "0"), "rate"),
+        ("rate_negative", ("--rate", "-250"), "rate"),
+        ("rate_nan", ("--rate", "nan"), "rate"),
+        ("rate_huge", ("--rate", "1e9"), "rate"),
+        ("rate_word", ("--rate", "fast"), "rate"),
+        ("timing_unknown", ("--timing", "fastest"), "timing"),
+        ("objective_unknown", ("--objective", "best"), "objective"),
+        ("start_from_three_values", ("--start-from", "1,2,3"), "start"),
+        ("start_from_words", ("--start-from", "a,b,c,d,e,f,g,h"), "start"),
+        ("camera_missing", ("--camera", "/nope"), "no camera at /nope"),
+        ("camera_relative", ("--camera", "shotCam"), "absolute prim path"),
+        ("camera_not_a_camera", ("--camera", "/World"), r"/World|no camera"),
+        ("camera_empty", ("--camera", ""), "prim path|camera"),
+        ("unknown_option", ("--fastest",), "no such option"),
+    ):
+        codes = (2, 3) if name == "placement_far" else (2,)
+        convert(name, good, *extra, must=(must,), codes=codes)
+    add("no_output", ["convert", good], "missing option")
+    add("no_shot", ["convert", "-o", "out.mcap"], "missing argument")
+    add("output_empty_name", ["convert", good, "-o", ""], r"-o|output")
+    add("output_is_a_folder", ["convert", good, "-o", inputs], "directory|folder")
+
+    # Robot and set files
+    os.mkfifo(inputs / "pipe.toml")
+    (inputs / "folder.toml").mkdir()
+    for name, (path, must) in _robot_and_set_files(inputs).items():
+        option = "--robot" if name.startswith("robot") else "--set-file"
+        convert(name.removesuffix(".toml"), good, option, path, must=(re.escape(path.name), must))
+    for option in ("--robot", "--set-file"):
+        key = option.strip("-").replace("-", "_")
+        for name, path, must in (
+            ("missing", inputs / "missing.toml", "missing.toml"),
+            ("fifo", inputs / "pipe.toml", "named pipe"),
+            ("folder", inputs / "folder.toml", "folder|directory"),
+            ("dev_null", "/dev/null", "character device"),
+        ):
+            convert(f"{key}_{name}", good, option, path, must=(must,))
+
+    # Outputs that would destroy an input, or cannot take a file
+    os.symlink(good, inputs / "link_to_shot.usda")
+    os.link(good, inputs / "hard_link_to_shot.usda")
+    (inputs / "sub").mkdir()
+    (inputs / "plain_file").write_text("not a folder\n", encoding="utf-8")
+    os.mkfifo(inputs / "pipe.mcap")
+    layered = inputs / "layered.usda"
+    (inputs / "set_dressing.usda").write_text('#usda 1.0\ndef Xform "set" {}\n', encoding="utf-8")
+    layered.write_text(
+        "#usda 1.0\n(\n    subLayers = [@./maya.usda@]\n)\n"
+        'def "dressing" (references = @./set_dressing.usda@) {}\n', encoding="utf-8")
+    robot_copy = inputs / "robot.toml"
+    shutil.copy(ROBOT_TOML, robot_copy)
+    set_file = inputs / "set.toml"
+    set_file.write_text("[placement]\nx = 0.0\n", encoding="utf-8")
+    outs = [
+        ("o_is_the_shot", good, ["-o", good], "it is the shot"),
+        ("o_is_a_symlink_to_the_shot", good, ["-o", inputs / "link_to_shot.usda"], "the shot"),
+        ("o_reaches_the_shot_through_dotdot", good, ["-o", inputs / "sub" / ".." / "maya.usda"],
+         "the shot"),
+        ("o_is_a_hard_link_to_the_shot", good, ["-o", inputs / "hard_link_to_shot.usda"],
+         "the shot"),
+        ("o_is_the_robot_file", good, ["-o", robot_copy, "--robot", robot_copy],
+         "the robot file"),
+        ("o_is_the_set_file", good, ["-o", set_file, "--set-file", set_file], "the set file"),
+        ("o_is_a_sublayer", layered, ["-o", good], "layer used by the shot"),
+        ("o_is_a_referenced_layer", layered, ["-o", inputs / "set_dressing.usda"],
+         "layer used by the shot"),
+        ("summary_is_the_shot", good, ["-o", "new.mcap", "--summary", good], "the shot"),
+        ("summary_is_a_sublayer", layered, ["-o", "new.mcap", "--summary", good],
+         "layer used"),
+        ("summary_is_the_output", good, ["-o", "out.mcap", "--summary", "out.mcap"],
+         "same file"),
+        ("summary_is_the_output_dotdot", good,
+         ["-o", "out.mcap", "--summary", "../" + "{case}" + "/out.mcap"], "same file"),
+        ("o_dev_null", good, ["-o", "/dev/null"], "character device"),
+        ("o_dev_full", good, ["-o", "/dev/full"], "character device"),
+        ("summary_dev_full", good, ["-o", "out.mcap", "--summary", "/dev/full"],
+         "character device"),
+        ("summary_dev_null", good, ["-o", "out.mcap", "--summary", "/dev/null"],
+         "character device"),
+        ("o_fifo", good, ["-o", inputs / "pipe.mcap"], "named pipe"),
+        ("summary_fifo", good, ["-o", "out.mcap", "--summary", inputs / "pipe.mcap"],
+         "named pipe"),
+        ("o_folder_missing", good, ["-o", "no_such_folder/x.mcap"], "does not exist"),
+        ("o_under_a_file", good, ["-o", inputs / "plain_file" / "x.mcap"], "not a folder"),
+        ("summary_folder_missing", good,
+         ["-o", "out.mcap", "--summary", "no_such_folder/s.json"], "does not exist"),
+        ("summary_under_a_file", good,
+         ["-o", "out.mcap", "--summary", inputs / "plain_file" / "s.json"], "not a folder"),
+        ("summary_in_proc", good, ["-o", "out.mcap", "--summary", "/proc/s.json"], "/proc"),
+        ("o_in_proc", good, ["-o", "/proc/x.mcap"], "/proc"),
+        ("o_in_sys", good, ["-o", "/sys/x.mcap"], "/sys"),
+    ]
+    for name, shot, extra, must in outs:
+        add(name, ["convert", shot, *extra], must)
+    cases["summary_is_the_output_dotdot"].args = [
+        a.replace("{case}", "summary_is_the_output_dotdot") for a in
+        cases["summary_is_the_output_dotdot"].args]
+    cases["summary_is_the_shot"].new_outputs = [Path("new.mcap")]
+    cases["summary_is_a_sublayer"].new_outputs = [Path("new.mcap")]
+
+    # A disk that fills up while writing; a standard output that cannot be written
+    convert("disk_full_while_writing", good, must=("cannot write", "too large"), fsize=65536)
+    add("check_stdout_full", ["check", good], "standard output", stdout="/dev/full")
+    add("check_json_stdout_full", ["check", good, "--json"], "standard output",
+        stdout="/dev/full")
+    add("info_stdout_full", ["info", "{good_mcap}"], "standard output", stdout="/dev/full")
+    add("info_of_a_usda", ["info", good], "maya.usda")
+    return cases, inputs
+
+
+# --------------------------------------------------------------------------------------------
+# Running it
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Result:
+    case: Case
+    folder: Path
+    rc: int
+    stdout: str
+    stderr: str
+    before: dict[str, bytes]
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_symlink() or not p.is_file():
+            continue
+        out[str(p.relative_to(folder))] = p.read_bytes()
+    return out
+
+
+def _serve(jobs: list[dict[str, object]]) -> dict[str, int]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-c", SERVER], input="".join(json.dumps(j) + "\n" for j in jobs),
+        capture_output=True, text=True, env=env, timeout=1800, check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    return {r["id"]: r["rc"] for r in map(json.loads, proc.stdout.splitlines())}
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
+    base = tmp_path_factory.mktemp("corpus")
+    cases, inputs = _corpus(base)
+    # an earlier, good result sits at the outputs of every case
+    good_dir = base / "good"
+    good_dir.mkdir()
+    proc = run_cli("convert", inputs / "maya.usda", "-o", good_dir / "out.mcap", "--summary",
+                   good_dir / "out.summary.json", "-q")
+    assert proc.returncode == 0, proc.stderr
+    good = {p.name: p.read_bytes() for p in good_dir.iterdir()}
+    jobs: list[dict[str, object]] = []
+    folders: dict[str, Path] = {}
+    for name, case in cases.items():
+        folder = base / name
+        folder.mkdir()
+        for file_name, data in good.items():
+            (folder / file_name).write_bytes(data)
+        case.args = [a.replace("{good_mcap}", str(folder / "out.mcap")) for a in case.args]
+        folders[name] = folder
+        jobs.append({"id": name, "cwd": str(folder), "args": case.args,
+                     "stdout": case.stdout or str(base / f"{name}.stdout"),
+                     "stderr": str(base / f"{name}.stderr"), "fsize": case.fsize})
+    before_inputs = _snapshot(inputs)
+    devices = {d: os.stat(d) for d in ("/dev/null", "/dev/full")}
+    half = [jobs[0::2], jobs[1::2]]
+    with ThreadPoolExecutor(2) as pool:
+        codes: dict[str, int] = {}
+        for part in pool.map(_serve, half):
+            codes.update(part)
+    assert _snapshot(inputs) == before_inputs, "an input changed"
+    for device, st in devices.items():  # never replaced by a regular file (we may be root)
+        now = os.stat(device)
+        assert stat.S_ISCHR(now.st_mode) and now.st_rdev == st.st_rdev, device
+    results = {}
+    for name, case in cases.items():
+        out_path = Path(case.stdout) if case.stdout else base / f"{name}.stdout"
+        stdout = out_path.read_text() if case.stdout is None else ""
+        stderr = (base / f"{name}.stderr").read_text(errors="backslashreplace")
+        results[name] = Result(case, folders[name], codes[name], stdout, stderr, good)
+    return results
+
+
+def _problems(name: str, r: Result) -> list[str]:
+    """What is wrong with one case's run (empty when it behaved)."""
+    problems = []
+    if r.rc not in r.case.codes:
+        problems.append(f"exit code {r.rc}, expected {r.case.codes}")
+    lines = r.stderr.splitlines()
+    if len(lines) != 1 or not lines[0].startswith("ERROR: "):
+        problems.append(f"stderr is not one ERROR line: {r.stderr!r}")
+    if "Traceback" in r.stderr or "Warning" in r.stderr:
+        problems.append("a traceback or warning on stderr")
+    line = lines[0] if lines else ""
+    problems += [f"{pattern!r} not in the error line" for pattern in r.case.must
+                 if not re.search(pattern, line, re.IGNORECASE)]
+    if r.stdout:
+        problems.append(f"printed on stdout: {r.stdout[:200]!r}")
+    after = {p.name: p.read_bytes() for p in r.folder.iterdir() if p.is_file()}
+    if after != r.before:
+        problems.append("the earlier result changed")
+    names = sorted(p.name for p in r.folder.iterdir())
+    if names != sorted(r.before):
+        problems.append(f"the output folder holds {names}")
+    problems += [f"{new} was created" for new in r.case.new_outputs if (r.folder / new).exists()]
+    return [f"{name}: {p} [{line}]" for p in problems]
+
+
+def test_the_corpus_is_large_enough(corpus: dict[str, Result]) -> None:
+    assert len(corpus) >= MIN_CASES, len(corpus)
+
+
+def test_every_bad_input_is_one_line_and_changes_nothing(corpus: dict[str, Result]) -> None:
+    problems = [p for name, r in corpus.items() for p in _problems(name, r)]
+    assert not problems, f"{len(problems)} problem(s):\n" + "\n".join(problems)
+
+
+def test_the_forked_runs_match_real_processes(corpus: dict[str, Result], tmp_path: Path) -> None:
+    """A sample of cases as ``python -m camtraj``: same exit code, same error line."""
+    sample = ["usda_header_then_random_3", "usd_range_1e300", "o_is_the_shot",
+              "summary_dev_full", "shot_fifo", "rate_nan", "usd_out_of_reach"]
+    for name in sample:
+        r = corpus[name]
+        folder = tmp_path / name
+        shutil.copytree(r.folder, folder)
+        proc = run_cli(*r.case.args, cwd=folder)
+        assert (proc.returncode, proc.stderr) == (r.rc, r.stderr), name
+
+
+# --------------------------------------------------------------------------------------------
+# A still camera is a valid shot (its speed is unbounded)
+# --------------------------------------------------------------------------------------------
+
+
+def _still_shot(path: Path, drift_m: float) -> Path:
+    """A camera that holds its pose (drifting ``drift_m`` in all) while the lens zooms."""
+    stage = _stage(path)
+    cam = _camera(stage, move=drift_m)
+    cam.GetFocalLengthAttr().Set(0.5, 1)  # tenths of a metre: 50 mm, then 35 mm
+    cam.GetFocalLengthAttr().Set(0.35, 24)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_still_camera_converts_and_reports_unbounded_speed(tmp_path: Path) -> None:
+    shot = _still_shot(tmp_path / "still.usda", 0.0)
+    out, summary = tmp_path / "still.mcap", tmp_path / "still.json"
+    proc = run_cli("convert", shot, "-o", out, "--summary", summary)
+    assert proc.returncode == 0, proc.stderr
+    assert "maximum feasible speed unbounded (the camera pose never changes)" in proc.stdout
+    data = json.loads(summary.read_text(), parse_constant=_no_constant)
+    assert data["max_speed"] is None and data["feasible_fps"] is None
+    assert out.stat().st_size > 0
+    check = run_cli("check", shot, "--json")
+    assert check.returncode == 0, check.stderr
+    data = json.loads(check.stdout, parse_constant=_no_constant)  # strict: no Infinity/NaN
+    assert data["max_speed"] is None
+
+
+def test_nearly_still_camera_caps_the_speed_shown(tmp_path: Path) -> None:
+    shot = _still_shot(tmp_path / "nearly.usda", 1e-9)
+    proc = run_cli("check", shot)
+    assert proc.returncode == 0, proc.stderr
+    line = next(x for x in proc.stdout.splitlines() if "maximum feasible speed" in x)
+    assert ">10000% of real time" in line, line
+    assert max(int(n) for n in re.findall(r"\d+", line)) <= 10000 * 24, line
+
+
+def _no_constant(name: str) -> None:
+    msg = f"{name} is not JSON"
+    raise ValueError(msg)

@@ -1,0 +1,200 @@
+"""Kill tests: SIGINT, SIGTERM and SIGKILL at several moments of a long convert (issue 8, §2).
+
+Every run converts the one-minute benchmark shot (samples/shots/make_samples.py) over an
+existing good MCAP and summary. A signal is sent at a moment found by watching the process,
+not after a fixed sleep:
+
+* ``import``: numpy's C extension is mapped (camtraj is importing the pipeline);
+* ``usd_import``: a USD library is mapped (the window where a Ctrl-C used to be swallowed);
+* ``solve``: the progress bar (on a pseudo terminal) shows some but not all IK frames;
+* ``write``: the MCAP's temporary file has content (the 10-second part of the move at a
+  1 kHz servo rate: a take as long to write as the whole minute at 240 Hz, found sooner).
+
+Afterwards the output folder holds exactly the earlier files, byte for byte: no partial or
+temporary file. SIGINT exits 130 and SIGTERM 143 with one ``ERROR:`` line; SIGKILL cannot
+be handled, and still leaves nothing (the temporary files are unnamed).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import pty
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from samples.shots.make_samples import write_long_shot
+from tests.test_convert import ROOT
+
+OLD_MCAP, OLD_SUMMARY = b"an earlier, good take\n", b'{"status": "ok"}\n'
+TIMEOUT = 240.0  # s: generous, for a loaded 2-core machine
+SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGKILL": signal.SIGKILL}
+MOMENTS = ("import", "usd_import", "solve", "write")
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("shots")
+    return {
+        "minute": write_long_shot(d / "minute.usda", n_frames=1440, fps=24),
+        "part": write_long_shot(d / "part.usda", n_frames=240, fps=24, part=1 / 6),
+    }
+
+
+def _maps(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/maps").read_text()
+    except OSError:
+        return ""
+
+
+def _temp_has_content(pid: int, folder: Path) -> bool:
+    """Some file of ``pid`` in ``folder`` (its unnamed temporary file) has bytes in it."""
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return False
+    for fd in fds:
+        try:
+            link = os.readlink(f"/proc/{pid}/fd/{fd}")
+            if link.startswith(str(folder) + "/") and os.stat(f"/proc/{pid}/fd/{fd}").st_size:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+class Run:
+    """A convert in a subprocess; stderr on a pipe, or on a pseudo terminal (progress bar)."""
+
+    def __init__(self, shot: Path, folder: Path, *extra: str, tty: bool = False) -> None:
+        self.folder = folder
+        self.out, self.summary = folder / "take.mcap", folder / "take.summary.json"
+        self.out.write_bytes(OLD_MCAP)
+        self.summary.write_bytes(OLD_SUMMARY)
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        args = [sys.executable, "-m", "camtraj", "convert", str(shot), "-o", str(self.out),
+                "--summary", str(self.summary), *extra]
+        self.master = -1
+        if tty:
+            self.master, slave = pty.openpty()
+            # a terminal of 24 x 120 characters (a size of 0 x 0 hides the bar)
+            fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))
+            self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=slave, env=env)
+            os.close(slave)
+        else:
+            self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.PIPE, env=env)
+        self.tty_text = ""
+        self.start = time.monotonic()
+
+    def read_tty(self) -> None:
+        while self.master >= 0 and select.select([self.master], [], [], 0)[0]:
+            try:
+                chunk = os.read(self.master, 65536)
+            except OSError:
+                return
+            if not chunk:
+                return
+            self.tty_text += chunk.decode("utf-8", "replace")
+
+    def wait_for(self, condition: Callable[[], bool], what: str, every: float = 0.002) -> None:
+        while not condition():
+            assert self.proc.poll() is None, f"the run ended before {what}"
+            assert time.monotonic() - self.start < TIMEOUT, f"no {what} in {TIMEOUT} s"
+            time.sleep(every)
+
+    def finish(self) -> tuple[int, str]:
+        if self.master >= 0:
+            while self.proc.poll() is None:
+                self.read_tty()
+                time.sleep(0.01)
+            self.read_tty()
+            os.close(self.master)
+            err = self.tty_text
+        else:
+            assert self.proc.stderr is not None
+            err = self.proc.communicate(timeout=TIMEOUT)[1].decode()
+        return self.proc.wait(timeout=TIMEOUT), err
+
+
+def _ik_progress(text: str) -> bool:
+    """The bar shows n of N frames, 0 < n < N."""
+    return any(0 < int(n) < int(total) for n, total in re.findall(r"(\d+)/(\d+)", text))
+
+
+def _moment(run: Run, moment: str) -> None:
+    pid = run.proc.pid
+    if moment == "import":
+        # (reading /proc/PID/maps holds up the process's own mmap calls: not too often)
+        run.wait_for(lambda: "_multiarray_umath" in _maps(pid), "numpy import", 0.01)
+    elif moment == "usd_import":
+        run.wait_for(lambda: "/pxr/" in _maps(pid), "USD import", 0.01)
+    elif moment == "solve":
+        def solving() -> bool:
+            run.read_tty()
+            return _ik_progress(run.tty_text)
+
+        run.wait_for(solving, "IK progress")
+    else:
+        run.wait_for(lambda: _temp_has_content(pid, run.folder), "MCAP writing")
+
+
+@pytest.mark.parametrize("moment", MOMENTS)
+@pytest.mark.parametrize("name", list(SIGNALS))
+def test_signal_leaves_the_earlier_outputs_and_nothing_else(
+    shots: dict[str, Path], tmp_path: Path, name: str, moment: str
+) -> None:
+    if moment == "write":
+        run = Run(shots["part"], tmp_path, "--rate", "1000", "-q")
+    else:
+        run = Run(shots["minute"], tmp_path, tty=moment == "solve")
+    try:
+        _moment(run, moment)
+        run.proc.send_signal(SIGNALS[name])
+        code, err = run.finish()
+    finally:
+        if run.proc.poll() is None:
+            run.proc.kill()
+            run.proc.wait()
+
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take.mcap", "take.summary.json"]
+    assert run.out.read_bytes() == OLD_MCAP
+    assert run.summary.read_bytes() == OLD_SUMMARY
+    if name == "SIGKILL":
+        assert code == -signal.SIGKILL
+        return
+    assert code == 128 + SIGNALS[name], err
+    assert "Traceback" not in err
+    lines = [line for line in re.split(r"[\r\n]+", err) if line.strip()]
+    if moment == "solve":  # the progress bar shared the terminal: the error comes last
+        lines = lines[-1:]
+        assert _ik_progress(run.tty_text)
+    assert lines == [f"ERROR: stopped by {name}; nothing was written"], err
+
+
+def test_ctrl_c_during_the_usd_import_is_not_swallowed(
+    shots: dict[str, Path], tmp_path: Path
+) -> None:
+    """Several moments inside the USD import window (it used to go on and exit 0)."""
+    for delay in (0.0, 0.02, 0.05, 0.1):
+        folder = tmp_path / f"d{delay}"
+        folder.mkdir()
+        run = Run(shots["minute"], folder, "-q")
+        _moment(run, "usd_import")
+        time.sleep(delay)
+        run.proc.send_signal(signal.SIGINT)
+        code, err = run.finish()
+        assert (code, err) == (130, "ERROR: stopped by SIGINT; nothing was written\n")
+        assert run.out.read_bytes() == OLD_MCAP
+        assert sorted(p.name for p in folder.iterdir()) == ["take.mcap", "take.summary.json"]
