@@ -158,7 +158,8 @@ def analyse(
     with _stage(timings, "read"):
         robot = load_robot(options)
         placement = load_placement(options)
-        shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+        shot = read_shot(shot_path, camera=options.camera, frames=options.frames,
+                         focal_length_unit=options.focal_length_unit)
         if shot.frames.shape[0] < 2:
             msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
             raise InputError(msg)
@@ -259,7 +260,7 @@ def summary(
     rep = take.report
     relaxed_margin = shot.frames[~path.within_margins].tolist()
     relaxed_step = shot.frames[~path.within_step].tolist()
-    warnings = list(rep.warnings)
+    warnings = [*shot.warnings, *rep.warnings]
     if relaxed_margin:
         warnings.append(f"{len(relaxed_margin)} frame(s) needed the hard joint limits "
                         f"(smooth margins relaxed): first {relaxed_margin[0]}")

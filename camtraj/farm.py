@@ -59,6 +59,7 @@ from camtraj import __version__
 from camtraj.batch import output_names, write_json_atomic, write_text_atomic
 from camtraj.errors import CamtrajError, InputError
 from camtraj.options import (
+    FOCAL_LENGTH_UNITS,
     OBJECTIVES,
     TIMING_MODES,
     ConvertOptions,
@@ -118,6 +119,7 @@ _OPENJD_PARAMS = {
     "--frames": ("Frames", "Film frame range A:B."),
     "--start-from": ("StartFrom", "Joint values the robot starts from [m, deg]."),
     "--objective": ("Objective", "IK objective."),
+    "--focal-length-unit": ("FocalLengthUnit", "How the shot's focalLength is read."),
 }
 """Job parameter name and description of each optional convert flag."""
 
@@ -236,6 +238,8 @@ def openjd_template(
         definition: dict[str, Any] = {"name": param, "type": "STRING", "minLength": 1}
         if flag == "--objective":
             definition["allowedValues"] = list(OBJECTIVES)
+        if flag == "--focal-length-unit":
+            definition["allowedValues"] = list(FOCAL_LENGTH_UNITS)
         definition["default"] = value
         is_path = flag in _PATH_FLAGS
         definition["description"] = description + (
