@@ -157,6 +157,8 @@ def analyse(
     timings: dict[str, float] = {}
     with _stage(timings, "read"):
         robot = load_robot(options)
+        start = (None if options.start_from is None
+                 else robot.joint_vector(options.start_from, "--start-from"))
         placement = load_placement(options)
         shot = read_shot(shot_path, camera=options.camera, frames=options.frames,
                          focal_length_unit=options.focal_length_unit)
@@ -169,7 +171,6 @@ def analyse(
         on_frames(int(shot.frames.shape[0]))
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
-        start = None if options.start_from is None else np.asarray(options.start_from, float)
         analysis.path = solve_path_report(
             robot, flange2base, start, objective=options.objective,
             frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress,
@@ -177,7 +178,7 @@ def analyse(
     with _stage(timings, "timing"):
         analysis.take = time_shot(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
-            rate=options.rate, frame_numbers=shot.frames,
+            rate=options.rate, frame_numbers=shot.frames, start=start,
         )
     return analysis
 

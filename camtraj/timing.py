@@ -325,6 +325,7 @@ def time_shot(
     mode: str = "shot",
     rate: float = 250.0,
     frame_numbers: ArrayLike | None = None,
+    start: ArrayLike | None = None,
 ) -> Take:
     """Time a joint path for the robot: from rest, through every film frame, to rest.
 
@@ -341,6 +342,9 @@ def time_shot(
         rate: Requested servo rate [Hz].
         frame_numbers: Film frame number of every frame, shape (n,) (default 0..n-1); used in
             messages and reports.
+        start: Joint vector the robot stands at when the take begins [m, rad], shape (8,);
+            the run-up moves from it (at rest) into the first frame's state. Default: the
+            take begins at rest wherever the shortest run-up into the first frame starts.
 
     Returns:
         The :class:`Take`.
@@ -407,7 +411,11 @@ def time_shot(
 
     # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
     step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
-    up = _runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
+    if start is None:
+        up = _runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
+    else:
+        up = _runup_from(np.asarray(start, dtype=np.float64), shot.q[0], shot.qd[0],
+                         shot.qdd[0], limits, step, frames[0])
     out = _runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], limits, step, frames[-1])
 
     n_up = up.q.shape[0]
@@ -1180,7 +1188,8 @@ def _empty_edge(p: Array, limits: Limits, key: str) -> _Edge:
 
 
 def _edge_report(
-    move: _StopMove, ticks: int, step: float, p: Array, limits: Limits, key: str, sign: float
+    move: _StopMove | _StartMove, ticks: int, step: float, p: Array, limits: Limits, key: str,
+    sign: float,
 ) -> dict[str, Any]:
     rest = move.rest_position
     return {
@@ -1193,7 +1202,9 @@ def _edge_report(
     }
 
 
-def _edge_position_check(move: _StopMove, limits: Limits, what: str, frame: int) -> None:
+def _edge_position_check(
+    move: _StopMove | _StartMove, limits: Limits, what: str, frame: int
+) -> None:
     tol = LIMIT_RTOL * (limits.upper - limits.lower)
     over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
     if over.size == 0:
@@ -1239,6 +1250,85 @@ def _runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int
     pos, vel, acc, jerk = move.sample(reverse_t)
     report = _edge_report(move, ticks, step, p, limits, "start", 1.0)
     return _Edge(pos, -vel, acc, -jerk, report, _edge_warnings(report, limits, "run-up"))
+
+
+class _StartMove:
+    """A ruckig move from rest at ``start`` into the state (p, v, a), all axes arriving together.
+
+    Same attributes as :class:`_StopMove` (``rest_position`` is the start); position interface,
+    time-synchronised, state-to-state only.
+    """
+
+    def __init__(self, start: Array, p: Array, v: Array, a: Array, limits: Limits) -> None:
+        from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+        inp = InputParameter(N_AXES)
+        inp.current_position = [float(x) for x in start]
+        inp.current_velocity = [0.0] * N_AXES
+        inp.current_acceleration = [0.0] * N_AXES
+        inp.target_position = [float(x) for x in p]
+        inp.target_velocity = [float(x) for x in v]
+        inp.target_acceleration = [float(x) for x in a]
+        inp.max_velocity = [float(x) for x in limits.velocity]
+        inp.max_acceleration = [float(x) for x in limits.acceleration]
+        inp.max_jerk = [float(x) for x in limits.jerk]
+        traj = Trajectory(N_AXES)
+        try:
+            result = Ruckig(N_AXES).calculate(inp, traj)
+        except RuntimeError as exc:
+            msg = f"ruckig could not plan the run-up from the start position: {exc}"
+            raise TimingLimitError(msg) from exc
+        if result not in (Result.Working, Result.Finished):
+            msg = f"ruckig could not plan the run-up from the start position ({result})"
+            raise TimingLimitError(msg)
+        self._traj = traj
+        self.duration = float(traj.duration)
+        self.rest_position = np.array(start, dtype=np.float64)
+        dense = np.linspace(0.0, self.duration, max(2, math.ceil(self.duration / 2e-4) + 1))
+        pos = np.array([traj.at_time(tm)[0] for tm in dense.tolist()], dtype=np.float64)
+        self.min = np.minimum(pos.min(axis=0), start)
+        self.max = np.maximum(pos.max(axis=0), start)
+
+    def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
+        """Position, velocity, acceleration and jerk at move times, each (k, 8); at rest
+        at the start before time 0."""
+        k = times.size
+        p = np.empty((k, N_AXES))
+        v = np.zeros((k, N_AXES))
+        a = np.zeros((k, N_AXES))
+        j = np.zeros((k, N_AXES))
+        at = self._traj.at_time
+        for i, tm in enumerate(times.tolist()):
+            if tm <= 0.0:
+                p[i] = self.rest_position
+                continue
+            pi, vi, ai = at(tm)
+            p[i], v[i], a[i] = pi, vi, ai
+            t2 = min(tm + _JERK_STEP, self.duration)
+            if t2 > tm:
+                j[i] = (np.array(at(t2)[2]) - a[i]) / (t2 - tm)
+        return p, v, a, j
+
+
+def _runup_from(
+    start: Array, p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int
+) -> _Edge:
+    """A jerk-limited move from rest at ``start`` into the first frame's state (p, v, a).
+
+    Held at rest at ``start`` before it so that the first frame lands on a servo tick.
+    """
+    if start.shape != (N_AXES,) or not np.all(np.isfinite(start)):
+        msg = f"start must be {N_AXES} finite joint values, got {start.tolist()}"
+        raise ValueError(msg)
+    if np.array_equal(start, p) and _at_rest(v, a, limits):
+        return _empty_edge(p, limits, "start")
+    move = _StartMove(start, p, v, a, limits)
+    _edge_position_check(move, limits, "run-up", frame)
+    ticks = max(1, math.ceil(move.duration / step - 1e-9))
+    hold = ticks * step - move.duration
+    pos, vel, acc, jerk = move.sample(np.arange(ticks, dtype=np.float64) * step - hold)
+    report = _edge_report(move, ticks, step, p, limits, "start", 1.0)
+    return _Edge(pos, vel, acc, jerk, report, _edge_warnings(report, limits, "run-up"))
 
 
 def _runout(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> _Edge:
