@@ -76,6 +76,8 @@ MAX_FRAMES = 100_000
 _PLAUSIBLE_FOCAL_MM = (4.0, 1200.0)
 # A rendered view direction this far from the orthonormalised one is worth a warning [deg].
 _SHEAR_WARN_DEG = 0.01
+# ShotFrame.frame is an int32.
+_MAX_FRAME_NUMBER = 2**31 - 1
 # Film-frame tolerance when a time-code range is turned into whole frames (float round-off).
 _FRAME_TOL = Fraction(1, 1_000_000)
 # Relative tolerance on singular values: below this the camera transform has (nearly) zero scale.
@@ -563,10 +565,17 @@ def _film_frames(
             )
             raise ShotFileError(msg)
     count = last - first + 1
+    span_text = f"{_big(first)}-{_big(last)}"
     if count > MAX_FRAMES:
         msg = (
-            f"{path}: frames {first}-{last} are {count} film frames; camtraj reads at most "
+            f"{path}: frames {span_text} are {_big(count)} film frames; camtraj reads at most "
             f"{MAX_FRAMES} in one shot: give a shorter range (--frames)"
+        )
+        raise ShotFileError(msg)
+    if max(abs(first), abs(last)) > _MAX_FRAME_NUMBER:
+        msg = (
+            f"{path}: frames {span_text}: film frame numbers must lie within "
+            f"±{_MAX_FRAME_NUMBER} (the MCAP stores them as 32-bit integers)"
         )
         raise ShotFileError(msg)
     return np.arange(first, last + 1, dtype=np.int64)
@@ -740,6 +749,11 @@ def _where(frames: NDArray[np.int64], bad: ArrayLike) -> str:
     if len(hits) > 1:
         text += f" ({len(hits)} frames in all: {frame_ranges(hits)})"
     return text
+
+
+def _big(n: int) -> str:
+    """A frame number or count as text, in short scientific form beyond 12 digits."""
+    return str(n) if abs(n) < 10**12 else f"{float(n):.3g}"
 
 
 def _fmt(value: float) -> str:

@@ -390,3 +390,10 @@ def test_huge_frame_counts_are_refused(tmp_path: Path, tcps: float, fps: float,
     UsdGeom.Camera.Define(stage, "/cam")
     with pytest.raises(ShotFileError, match=r"at most 100000"):
         read_shot(_save(stage))
+
+
+def test_frame_numbers_beyond_32_bits_are_refused(tmp_path: Path) -> None:
+    stage = _stage(tmp_path / "far.usda", tcps=24.0, fps=24.0, start=1e30, end=1e30 + 2.0)
+    UsdGeom.Camera.Define(stage, "/cam")
+    with pytest.raises(ShotFileError, match=r"32-bit"):
+        read_shot(_save(stage))
