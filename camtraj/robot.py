@@ -193,9 +193,12 @@ class Robot:
             InputError: Not 8 finite values, or an axis outside its limits (the message names
                 the axis, the value and the limit, in m or deg).
         """
-        qa = np.asarray(q, dtype=float)
+        try:
+            qa = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            qa = np.full(0, np.nan)
         if qa.shape != (N_JOINTS,) or not np.all(np.isfinite(qa)):
-            msg = f"{what} needs {N_JOINTS} finite joint values, got {qa.tolist()}"
+            msg = f"{what} needs {N_JOINTS} finite joint values, got {q!r}"
             raise InputError(msg)
         for j, name in enumerate(self.joint_names):
             if self.lower[j] - 1e-9 <= qa[j] <= self.upper[j] + 1e-9:
