@@ -358,7 +358,8 @@ def _validate_openjd(template: dict[str, Any], job_dir: Path) -> None:
         )
         create_job(job_template=decoded, job_parameter_values=values)
     except (DecodeValidationError, ValueError) as exc:
-        msg = f"the Open Job Description template does not validate: {exc}"
+        detail = "; ".join(" ".join(line.split()) for line in str(exc).splitlines() if line.strip())
+        msg = f"the Open Job Description template does not validate: {detail}"
         raise InputError(msg) from exc
 
 

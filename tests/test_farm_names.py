@@ -17,6 +17,7 @@ from xml.etree import ElementTree as ET
 import pytest
 
 from camtraj import farm
+from camtraj.errors import InputError
 from tests.test_farm import SAMPLES, _env, _openjd, _options
 
 yaml = pytest.importorskip("yaml")
@@ -102,3 +103,12 @@ def test_focal_length_unit_reaches_both_job_formats(tmp_path: Path) -> None:
     assert _openjd("check", str(job)).returncode == 0
     _, manifest = farm.export_opencue(shots, tmp_path / "job.xml", options=options)
     assert json.loads(manifest.read_text())["options"]["focal_length_unit"] == "mm"
+
+
+def test_an_invalid_openjd_template_is_a_one_line_error(tmp_path: Path) -> None:
+    shots = _project(tmp_path, ["plain"])
+    with pytest.raises(InputError) as info:
+        farm.export_openjd(shots, tmp_path / "job.yaml", options=_options(), name="x" * 200)
+    assert "\n" not in str(info.value)
+    assert "128 characters" in str(info.value)
+    assert not (tmp_path / "job.yaml").exists()
