@@ -183,9 +183,12 @@ def analyse(
     with _stage(timings, "read"):
         require_regular_files(shot_path, options)
         robot = load_robot(options)
+        start = (None if options.start_from is None
+                 else robot.joint_vector(options.start_from, "--start-from"))
         placement = load_placement(options)
         try:
-            shot = read_shot(shot_path, camera=options.camera, frames=options.frames)
+            shot = read_shot(shot_path, camera=options.camera, frames=options.frames,
+                             focal_length_unit=options.focal_length_unit)
         except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
             msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
             raise ShotFileError(msg) from None
@@ -199,7 +202,6 @@ def analyse(
         on_frames(int(shot.frames.shape[0]))
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
-        start = None if options.start_from is None else np.asarray(options.start_from, float)
         analysis.path = solve_path_report(
             robot, flange2base, start, objective=options.objective,
             frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress,
@@ -207,7 +209,7 @@ def analyse(
     with _stage(timings, "timing"):
         analysis.take = time_shot(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
-            rate=options.rate, frame_numbers=shot.frames,
+            rate=options.rate, frame_numbers=shot.frames, start=start,
         )
     return analysis
 
@@ -308,7 +310,7 @@ def summary(
     assert take is not None and path is not None
     rep = take.report
     relaxed_step = shot.frames[~path.within_step].tolist()
-    warnings = list(rep.warnings)
+    warnings = [*shot.warnings, *rep.warnings]
     if relaxed_step and take.mode == "shot":
         warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
                         f"limit between frames: first {relaxed_step[0]}")

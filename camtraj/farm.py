@@ -8,11 +8,13 @@ task parameters ``Shot``, ``Output`` and ``Summary`` are zipped (``combination: 
 Output, Summary)"``), and each task runs ``camtraj convert SHOT -o OUTPUT --summary SUMMARY``
 plus the convert options. OpenJD passes each argument as one argv word (no shell), and every
 value the user chose (paths, camera prim, ...) travels as a parameter *value*, never as template
-text, so spaces, quotes and braces in names are safe. The convert options are job parameters
-(``Timing``, ``Rate``, and ``Camera``, ``Robot``, ``Placement``, ``Frames`` when given) whose
-defaults are the exported values (likewise ``SetFile``, ``StartFrom``, ``Objective``), so they
-can be changed at submission; ``CamtrajCommand`` is the
-camtraj executable on the render hosts. YAML, or JSON when the job file ends in ``.json``.
+text, so spaces and quotes in names are safe; task-parameter values and the job name are
+format strings, so a ``{`` or ``}`` in them is spelled as a reference to the job parameters
+``CamtrajLeftBrace`` / ``CamtrajRightBrace`` (added only when needed). The convert options
+are job parameters (``Timing``, ``Rate``, and ``Camera``, ``Robot``, ``Placement``, ``Frames``
+when given) whose defaults are the exported values (likewise ``SetFile``, ``StartFrom``,
+``Objective``, ``FocalLengthUnit``), so they can be changed at submission; ``CamtrajCommand``
+is the camtraj executable on the render hosts. YAML, or JSON when the job file ends in ``.json``.
 
 **OpenCue** (``--format opencue``): a job spec XML (``cjsl`` DTD) built with opencue-pyoutline
 (an ``Outline`` with one ``Shell`` layer, serialised *without* the pycuerun wrapper, so render
@@ -25,7 +27,9 @@ as OpenCue requires::
 Cuebot replaces ``#IFRAME#`` with the frame number and RQD runs the line through a shell;
 ``run-task`` reads the manifest and converts entry *i*. The manifest (not the command line)
 carries the shot list, so names need no shell quoting beyond the manifest path itself
-(``shlex.quote``), and a job of many shots stays within Cuebot's 4000-character command limit.
+(``shlex.quote``, with every ``#`` outside the quotes as ``\\#`` so that no Cuebot token such
+as ``#IFRAME#`` can match inside a path), and a job of many shots stays within Cuebot's
+4000-character command limit.
 
 **Paths** are absolute by default. With ``--relative-paths`` they are relative to the job file's
 folder: in OpenJD through the ``JobDir`` PATH parameter (default ``.``, which OpenJD resolves
@@ -59,6 +63,7 @@ from camtraj import __version__
 from camtraj.batch import output_names, write_json_atomic, write_text_atomic
 from camtraj.errors import CamtrajError, InputError
 from camtraj.options import (
+    FOCAL_LENGTH_UNITS,
     OBJECTIVES,
     TIMING_MODES,
     ConvertOptions,
@@ -118,10 +123,42 @@ _OPENJD_PARAMS = {
     "--frames": ("Frames", "Film frame range A:B."),
     "--start-from": ("StartFrom", "Joint values the robot starts from [m, deg]."),
     "--objective": ("Objective", "IK objective."),
+    "--focal-length-unit": ("FocalLengthUnit", "How the shot's focalLength is read."),
 }
 """Job parameter name and description of each optional convert flag."""
 
 _PATH_FLAGS = ("--robot", "--set-file")
+
+_BRACE_PARAMS = {"{": "CamtrajLeftBrace", "}": "CamtrajRightBrace"}
+"""Job parameters whose values are a literal ``{`` and ``}`` (see :func:`_openjd_literal`)."""
+
+
+def _openjd_literal(text: str) -> str:
+    """``text`` spelled as an OpenJD format string that resolves to exactly ``text``.
+
+    Task-parameter values and the job name are format strings: ``{{ ... }}`` in them is an
+    expression (a shot named ``a{{Param.Timing}}b.usda`` would become ``ashotb.usda``, and an
+    unbalanced ``{{`` fails validation). The 2023-09 format strings have no escape, so each
+    brace becomes a reference to a job parameter whose value is that brace (job parameter
+    values are not format strings).
+    """
+    return "".join(
+        "{{Param." + _BRACE_PARAMS[c] + "}}" if c in _BRACE_PARAMS else c for c in text
+    )
+
+
+def _cue_word(text: str) -> str:
+    """``text`` as one shell word that no OpenCue frame token can match.
+
+    Cuebot replaces ``#IFRAME#``, ``#ZFRAME#``, ``#LAYER#``, ``#JOB#``, ``#FRAME#`` (and more)
+    in the command text before the render host's shell runs it; a job file named
+    ``job#IFRAME#.xml`` would put a token into the manifest path. Every ``#`` is written as a
+    backslash-escaped ``\\#`` between shell-quoted pieces, which the shell turns back into
+    ``#`` and no ``#TOKEN#`` pattern matches.
+    """
+    if "#" not in text:
+        return shlex.quote(text)
+    return "\\#".join(shlex.quote(piece) for piece in text.split("#"))
 
 
 def _portable(options: ConvertOptions, spell: _Paths) -> ConvertOptions:
@@ -188,6 +225,24 @@ def openjd_template(
                 "(the job file's folder).",
             }
         )
+    literal_braces = any(
+        c in text
+        for text in [name or "", *(spell(s) for s in shots),
+                     *(spell(p) for pair in names for p in pair)]
+        for c in _BRACE_PARAMS
+    )
+    if literal_braces:
+        params += [
+            {
+                "name": param,
+                "type": "STRING",
+                "default": brace,
+                "allowedValues": [brace],
+                "description": f"A literal {brace} in this job's paths (format strings have "
+                "no escape).",
+            }
+            for brace, param in _BRACE_PARAMS.items()
+        ]
     params.append(
         {
             "name": "CamtrajCommand",
@@ -236,6 +291,8 @@ def openjd_template(
         definition: dict[str, Any] = {"name": param, "type": "STRING", "minLength": 1}
         if flag == "--objective":
             definition["allowedValues"] = list(OBJECTIVES)
+        if flag == "--focal-length-unit":
+            definition["allowedValues"] = list(FOCAL_LENGTH_UNITS)
         definition["default"] = value
         is_path = flag in _PATH_FLAGS
         definition["description"] = description + (
@@ -247,7 +304,9 @@ def openjd_template(
     stated = f"Made by camtraj {__version__} (camtraj farm export --format openjd)."
     return {
         "specificationVersion": "jobtemplate-2023-09",
-        "name": name or f"camtraj: {len(shots)} shot{'s' if len(shots) != 1 else ''}",
+        "name": _openjd_literal(
+            name or f"camtraj: {len(shots)} shot{'s' if len(shots) != 1 else ''}"
+        ),
         "description": f"{stated} Converts {len(shots)} USD shot(s) into camera-robot moves "
         "(MCAP), one task per shot.",
         "parameterDefinitions": params,
@@ -257,9 +316,12 @@ def openjd_template(
                 "description": "camtraj convert, one shot per task.",
                 "parameterSpace": {
                     "taskParameterDefinitions": [
-                        {"name": "Shot", "type": "PATH", "range": [spell(s) for s in shots]},
-                        {"name": "Output", "type": "PATH", "range": [spell(m) for m, _ in names]},
-                        {"name": "Summary", "type": "PATH", "range": [spell(j) for _, j in names]},
+                        {"name": "Shot", "type": "PATH",
+                         "range": [_openjd_literal(spell(s)) for s in shots]},
+                        {"name": "Output", "type": "PATH",
+                         "range": [_openjd_literal(spell(m)) for m, _ in names]},
+                        {"name": "Summary", "type": "PATH",
+                         "range": [_openjd_literal(spell(j)) for _, j in names]},
                     ],
                     "combination": "(Shot, Output, Summary)",
                 },
@@ -296,7 +358,8 @@ def _validate_openjd(template: dict[str, Any], job_dir: Path) -> None:
         )
         create_job(job_template=decoded, job_parameter_values=values)
     except (DecodeValidationError, ValueError) as exc:
-        msg = f"the Open Job Description template does not validate: {exc}"
+        detail = "; ".join(" ".join(line.split()) for line in str(exc).splitlines() if line.strip())
+        msg = f"the Open Job Description template does not validate: {detail}"
         raise InputError(msg) from exc
 
 
@@ -435,7 +498,7 @@ def export_opencue(
 
     manifest_ref = manifest.name if relative else str(manifest.resolve())
     command = " ".join(
-        [shlex.quote(executable), "farm", "run-task", shlex.quote(manifest_ref), FRAME_TOKEN]
+        [_cue_word(executable), "farm", "run-task", _cue_word(manifest_ref), FRAME_TOKEN]
     )
     frame_range = f"1-{len(shots)}"
     job_name = _cue_name(name or f"camtraj_{path.stem}")

@@ -18,6 +18,7 @@ from camtraj.errors import InputError
 
 TIMING_MODES = ("shot", "scale", "optimal")
 OBJECTIVES = ("shot", "paper")
+FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -35,6 +36,8 @@ class ConvertOptions:
         timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
         start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
         objective: IK objective override (``"shot"`` or ``"paper"``).
+        focal_length_unit: ``"schema"`` (USD's tenths of a scene unit) or ``"mm"`` (what some
+            older exporters write).
     """
 
     camera: str | None = None
@@ -46,6 +49,7 @@ class ConvertOptions:
     timing: str = "shot"
     start_from: tuple[float, ...] | None = None
     objective: str | None = None
+    focal_length_unit: str = "schema"
 
     def __post_init__(self) -> None:
         if self.timing not in TIMING_MODES:
@@ -60,7 +64,12 @@ class ConvertOptions:
         if self.objective is not None and self.objective not in OBJECTIVES:
             msg = f"objective must be one of {', '.join(OBJECTIVES)}, got {self.objective!r}"
             raise InputError(msg)
-
+        if self.focal_length_unit not in FOCAL_LENGTH_UNITS:
+            msg = (
+                f"focal-length-unit must be one of {', '.join(FOCAL_LENGTH_UNITS)}, "
+                f"got {self.focal_length_unit!r}"
+            )
+            raise InputError(msg)
 
 
 # --------------------------------------------------------------------------------------------
@@ -164,7 +173,8 @@ def convert_options(func: F) -> F:
 
 
 def more_convert_options(func: F) -> F:
-    """Click decorator adding ``--set-file``, ``--start-from`` and ``--objective``.
+    """Click decorator adding ``--set-file``, ``--start-from``, ``--objective`` and
+    ``--focal-length-unit``.
 
     The less common convert options; pass their values to :func:`build_options` too.
     """
@@ -185,6 +195,14 @@ def more_convert_options(func: F) -> F:
             type=click.Choice(OBJECTIVES),
             help="IK objective (default: the robot file's).",
         ),
+        click.option(
+            "--focal-length-unit",
+            type=click.Choice(FOCAL_LENGTH_UNITS),
+            default="schema",
+            show_default=True,
+            help="How the shot's focalLength is read: schema = tenths of a scene unit (USD); "
+            "mm = millimetres, as some older exporters write it.",
+        ),
     ]
     for decorator in reversed(decorators):
         func = decorator(func)
@@ -202,6 +220,7 @@ def build_options(
     set_file: str | None = None,
     start_from: str | None = None,
     objective: str | None = None,
+    focal_length_unit: str = "schema",
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
 
@@ -219,6 +238,7 @@ def build_options(
         timing=timing,
         start_from=_parse_start_from(start_from) if start_from is not None else None,
         objective=objective,
+        focal_length_unit=focal_length_unit,
     )
 
 
@@ -245,6 +265,8 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--start-from", _format_start_from(options.start_from)))
     if options.objective is not None:
         pairs.append(("--objective", options.objective))
+    if options.focal_length_unit != "schema":
+        pairs.append(("--focal-length-unit", options.focal_length_unit))
     return pairs
 
 

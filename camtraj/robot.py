@@ -7,7 +7,9 @@ z up, joints ordered track, rotate, lift, extend, elbow, pan, tilt, roll. Transf
 
 from __future__ import annotations
 
+import codecs
 import math
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -17,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.errors import RobotFileError
+from camtraj.errors import InputError, RobotFileError
 
 Array = NDArray[np.float64]
 
@@ -154,14 +156,14 @@ class Robot:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Robot:
-        """Load a robot description file; every error names the file and the key."""
+        """Load a robot description file (UTF-8 TOML).
+
+        Raises:
+            RobotFileError: The file is missing, not a regular file, not UTF-8 text, not
+                TOML, or lacks or mistypes a value; the message names the file and the key.
+        """
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            msg = f"robot file {path}: cannot read it ({exc.strerror or exc})"
-            raise RobotFileError(msg) from exc
-        return cls.from_toml_text(text, source=str(path))
+        return cls.from_toml_text(_read_text(path), source=str(path))
 
     @classmethod
     def from_toml_text(cls, text: str, *, source: str = "<text>") -> Robot:
@@ -192,6 +194,38 @@ class Robot:
             (qa >= self.lower - tol) & (qa <= self.upper + tol), axis=-1
         )
         return inside
+
+    def joint_vector(self, q: ArrayLike, what: str) -> Array:
+        """``q`` as an (8,) joint vector inside the position limits [m, rad].
+
+        Args:
+            q: Joint values, shape (8,).
+            what: Where they come from, for the message (e.g. ``"--start-from"``).
+
+        Raises:
+            InputError: Not 8 finite values, or an axis outside its limits (the message names
+                the axis, the value and the limit, in m or deg).
+        """
+        try:
+            qa = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            qa = np.full(0, np.nan)
+        if qa.shape != (N_JOINTS,) or not np.all(np.isfinite(qa)):
+            msg = f"{what} needs {N_JOINTS} finite joint values, got {q!r}"
+            raise InputError(msg)
+        for j, name in enumerate(self.joint_names):
+            if self.lower[j] - 1e-9 <= qa[j] <= self.upper[j] + 1e-9:
+                continue
+            scale, unit = (1.0, "m") if PRISMATIC[j] else (180.0 / math.pi, "deg")
+            side, bound = ("upper", self.upper[j]) if qa[j] > self.upper[j] else (
+                "lower", self.lower[j])
+            msg = (
+                f"{what}: {name} = {qa[j] * scale:g} {unit} is beyond its {side} limit "
+                f"{bound * scale:g} {unit} (limits {self.lower[j] * scale:g} to "
+                f"{self.upper[j] * scale:g} {unit}, robot file {self.source})"
+            )
+            raise InputError(msg)
+        return qa
 
     def counts(self, q: ArrayLike) -> dict[str, Array]:
         """Controller counts for the axes that have controller units."""
@@ -267,6 +301,39 @@ def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
 # Robot description file
 # ---------------------------------------------------------------------------------------------
 
+def _read_text(path: Path) -> str:
+    """The file's text, refusing what is not a regular UTF-8 file (a FIFO would block)."""
+    where = f"robot file {path}"
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+            msg = f"{where}: cannot read it ({kind})"
+            raise RobotFileError(msg)
+        data = path.read_bytes()
+    except OSError as exc:
+        msg = f"{where}: cannot read it ({exc.strerror or exc})"
+        raise RobotFileError(msg) from None
+    for bom, name in ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
+                      (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16")):
+        if data.startswith(bom):
+            msg = f"{where}: the file is {name} text; save it as UTF-8 (TOML files are UTF-8)"
+            raise RobotFileError(msg)
+    try:
+        text = data.decode("utf-8-sig")  # a BOM (Windows editors) is fine
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        msg = (
+            f"{where}: not UTF-8 text (byte 0x{data[exc.start]:02x} on line {line}); "
+            "a robot file is UTF-8 TOML"
+        )
+        raise RobotFileError(msg) from None
+    if "\0" in text:
+        msg = f"{where}: holds NUL bytes: a binary or UTF-16 file, not UTF-8 TOML text"
+        raise RobotFileError(msg)
+    return text
+
+
 _TOP_KEYS = {"robot", "dh", "joints", "mount", "ik", "controller"}
 _JOINT_KEYS = {
     "kind", "min", "max", "max_velocity", "max_acceleration", "max_jerk", "weight", "home",
@@ -280,20 +347,25 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         return RobotFileError(f"{where}: [{key}] {what}")
 
     _no_unknown(data, _TOP_KEYS, where, "top level")
-    meta = _table(data, "robot", where, required=False)
+    meta = _table(data, "robot", where, required=True)
     _no_unknown(meta, {"name", "angle_unit"}, where, "[robot]")
-    name = str(meta.get("name", "camera robot"))
-    unit = meta.get("angle_unit", "deg")
+    name = meta.get("name", "camera robot")
+    if not isinstance(name, str):
+        raise fail("robot.name", f"= {name!r}: must be a string")
+    if "angle_unit" not in meta:
+        raise fail("robot.angle_unit", "is missing: say \"deg\" or \"rad\"")
+    unit = meta["angle_unit"]
     if unit not in ("deg", "rad"):
         raise fail("robot", f"angle_unit = {unit!r}: must be \"deg\" or \"rad\"")
     ang = math.pi / 180.0 if unit == "deg" else 1.0
 
-    dh_tab = _table(data, "dh", where, required=False)
+    dh_tab = _table(data, "dh", where, required=True)
     _no_unknown(dh_tab, {"r10", "r2", "l3", "r40", "r6"}, where, "[dh]")
-    defaults = DHConstants()
     dh_vals: dict[str, float] = {}
     for key in ("r10", "r2", "l3", "r40", "r6"):
-        val = _number(dh_tab.get(key, getattr(defaults, key)), f"dh.{key}", where)
+        if key not in dh_tab:
+            raise fail(f"dh.{key}", "is missing: the DH model needs r10, r2, l3, r40 and r6 [m]")
+        val = _number(dh_tab[key], f"dh.{key}", where)
         if not 0.0 <= val <= 50.0:
             raise fail(f"dh.{key}", f"= {val}: must be between 0 and 50 m")
         dh_vals[key] = val
@@ -317,9 +389,6 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         scale = 1.0 if kind == "prismatic" else ang
         for col in cols:
             if col not in jt:
-                if col == "home":
-                    cols[col].append(0.0)
-                    continue
                 raise fail(f"{key}.{col}", "is missing")
             cols[col].append(_number(jt[col], f"{key}.{col}", where) * (
                 1.0 if col == "weight" else scale
@@ -340,17 +409,16 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
             "joints.elbow", "limits must lie inside [-180, 0] deg (the mechanism's range)"
         )
 
-    mount = _table(data, "mount", where, required=False)
+    mount = _table(data, "mount", where, required=True)
     _no_unknown(mount, {"rotation", "offset"}, where, "[mount]")
-    rot = np.asarray(
-        mount.get("rotation", [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]), dtype=float
-    )
-    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
-        raise fail("mount.rotation", "must be a 3x3 matrix of numbers")
+    for key in ("rotation", "offset"):
+        if key not in mount:
+            raise fail(f"mount.{key}", "is missing")
+    rot = _array(mount["rotation"], (3, 3), "mount.rotation", "a 3x3 matrix of numbers", where)
     if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
         raise fail("mount.rotation", "must be a proper rotation (orthonormal, det +1)")
-    offset = np.asarray(mount.get("offset", [0.0, 0.0, 0.0]), dtype=float)
-    if offset.shape != (3,) or not np.all(np.isfinite(offset)) or np.abs(offset).max() > 5:
+    offset = _array(mount["offset"], (3,), "mount.offset", "three numbers [m]", where)
+    if np.abs(offset).max() > 5:
         raise fail("mount.offset", "must be three numbers [m], each within ±5 m")
     camera2flange = np.eye(4)
     camera2flange[:3, :3] = rot
@@ -463,6 +531,20 @@ def _no_unknown(table: dict[str, Any], allowed: set[str], where: str, what: str)
             f"allowed: {', '.join(sorted(allowed))}"
         )
         raise RobotFileError(msg)
+
+
+def _array(value: Any, shape: tuple[int, ...], key: str, what: str, where: str) -> Array:
+    """A nested list of finite numbers of exactly ``shape`` (no ragged rows, no strings)."""
+
+    def values(v: Any, dims: tuple[int, ...]) -> list[Any]:
+        if not isinstance(v, list) or len(v) != dims[0]:
+            msg = f"{where}: [{key}] = {value!r}: must be {what}"
+            raise RobotFileError(msg)
+        if len(dims) == 1:
+            return [_number(x, key, where) for x in v]
+        return [values(row, dims[1:]) for row in v]
+
+    return np.array(values(value, shape), dtype=np.float64)
 
 
 def _number(value: Any, key: str, where: str) -> float:

@@ -19,6 +19,17 @@ Lens units follow the UsdGeom.Camera schema ("Units of Measure for Camera Proper
 ``50`` is 50 mm and on a metre stage a 50 mm lens is authored as ``0.5``. Hence
 ``focal_length_mm = focalLength * metersPerUnit * 100``. ``focusDistance`` is in plain scene
 units. ``fStop`` is unitless; 0 means unset (a pinhole, no depth of field) and is kept as 0.
+Some older exporters (Blender before 3.x among them) write ``focalLength`` in millimetres
+whatever the stage units; ``focal_length_unit="mm"`` reads it that way, and a focal length
+that is implausible for a real lens gets a warning that says which reading would fit.
+
+Film frames are not time codes. A stage's ``timeCodesPerSecond`` (tcps) and
+``framesPerSecond`` (fps) may differ (Houdini and some Maya exports write 240 tcps at 24 fps):
+film frame ``f`` is time code ``f * tcps / fps``. The shot is sampled on whole film frames
+inside the stage's ``startTimeCode``/``endTimeCode`` (or, without them, inside the span of the
+camera's time samples, so motion-blur sub-frame keys at f-1/4, f, f+1/4 still sample at f).
+Rates are exact fractions: 23.976 and 23.976023976 both mean 24000/1001, so an NTSC stage that
+writes one as tcps and the other as fps keeps every frame.
 
 Every read failure is a :class:`~camtraj.errors.ShotFileError` with a one-line message; USD's
 own errors (``pxr.Tf.ErrorException``) never escape, and its warnings (for example a missing
@@ -30,10 +41,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import numbers
 import operator
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -55,8 +68,18 @@ _CRATE_MAGIC = b"PXR-USDC"
 _TEXT_MAGIC = b"#usda"
 _ZIP_MAGIC = b"PK\x03\x04"
 _SUPPORTED_UP_AXES = ("Y", "Z")
-MAX_FRAMES = 1_000_000
-"""Most frames a shot may have (11.5 hours at 24 fps); more is a broken time range or rate."""
+FOCAL_LENGTH_UNITS = ("schema", "mm")
+"""``focalLength`` as the UsdGeom.Camera schema says (tenths of a scene unit), or millimetres."""
+MAX_FRAMES = 100_000
+"""The most film frames one shot may have (69 minutes at 24 fps)."""
+# Focal lengths of real cine and photo lenses [mm]: fisheyes to the longest telephotos.
+_PLAUSIBLE_FOCAL_MM = (4.0, 1200.0)
+# A rendered view direction this far from the orthonormalised one is worth a warning [deg].
+_SHEAR_WARN_DEG = 0.01
+# ShotFrame.frame is an int32.
+_MAX_FRAME_NUMBER = 2**31 - 1
+# Film-frame tolerance when a time-code range is turned into whole frames (float round-off).
+_FRAME_TOL = Fraction(1, 1_000_000)
 # Relative tolerance on singular values: below this the camera transform has (nearly) zero scale.
 _DEGENERATE_SCALE = 1e-9
 
@@ -70,13 +93,11 @@ class Shot:
     Attributes:
         source: The shot file path as given to :func:`read_shot`.
         camera_path: Prim path of the camera used, e.g. ``"/shotCam"``.
-        frames: (n,) film frame numbers: the sampled USD time codes rounded to integers
-            (consecutive when ``timeCodesPerSecond == framesPerSecond``, the usual case).
-        time_codes: (n,) the USD time codes sampled.
-        times: (n,) time in [s] from the first sampled frame:
-            ``(time_codes - time_codes[0]) / timeCodesPerSecond``.
+        frames: (n,) consecutive film frame numbers (``time_code * fps / tcps``).
+        time_codes: (n,) the USD time codes sampled (``frame * tcps / fps``).
+        times: (n,) time in [s] from the first sampled frame: ``(frames - frames[0]) / fps``.
         fps: Frames per second of the shot (the stage's ``framesPerSecond`` if authored,
-            else its ``timeCodesPerSecond``).
+            else its ``timeCodesPerSecond``), NTSC rates exact (23.976 is 24000/1001).
         cam2world: (n, 4, 4) camera pose in the converted world (metres, Z-up), column-vector
             convention; the rotation is orthonormal with determinant +1 (scale removed). The
             camera looks down its local -Z axis with local +Y up.
@@ -85,6 +106,8 @@ class Shot:
         f_stop: (n,) f-number; 0 when unset (pinhole).
         meters_per_unit: The stage's ``metersPerUnit`` (scene unit length in [m]).
         up_axis: The stage's up axis, ``"Y"`` or ``"Z"``.
+        warnings: One-line notes about the shot that do not stop it (an implausible focal
+            length, an orthographic camera, a sheared parent).
     """
 
     source: str
@@ -99,6 +122,7 @@ class Shot:
     f_stop: NDArray[np.float64]
     meters_per_unit: float
     up_axis: str
+    warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         n = len(self.frames)
@@ -151,6 +175,8 @@ def read_shot(
     path: str | Path,
     camera: str | None = None,
     frames: tuple[int, int] | None = None,
+    *,
+    focal_length_unit: str = "schema",
 ) -> Shot:
     """Read a camera's move from a USD shot, one sample per film frame.
 
@@ -158,26 +184,35 @@ def read_shot(
         path: A USD file (``.usd``, ``.usda``, ``.usdc``, ``.usdz``).
         camera: Prim path of the camera, e.g. ``"/shotCam"``. Without one the stage must have
             exactly one UsdGeom.Camera.
-        frames: Inclusive ``(first, last)`` time codes to read, inside the stage's
-            ``startTimeCode``/``endTimeCode``. Default: the whole authored range. A stage
-            with no authored range uses the span of the camera's (and its ancestors')
-            transform time samples.
+        frames: Inclusive ``(first, last)`` film frames to read, inside the stage's
+            ``startTimeCode``/``endTimeCode`` (converted to film frames). Default: every
+            whole film frame of the authored range. A stage with no authored range uses the
+            span of the camera's (and its ancestors') transform and lens time samples.
+        focal_length_unit: ``"schema"``: ``focalLength`` is in tenths of a scene unit (the
+            UsdGeom.Camera schema); ``"mm"``: it is in millimetres (older exporters).
 
     Returns:
-        The sampled :class:`Shot`; the sampling step is ``timeCodesPerSecond /
-        framesPerSecond`` time codes (normally 1).
+        The sampled :class:`Shot`, one sample per film frame (every ``timeCodesPerSecond /
+        framesPerSecond`` time codes, normally 1).
 
     Raises:
         ShotFileError: Missing or unreadable file, no/ambiguous/unknown camera, unsupported
             ``upAxis`` or ``metersPerUnit``, a bad frame range, or a camera transform or lens
             value that is not finite, mirrored or degenerate at some frame (the message names
             the frame).
+        ValueError: An unknown ``focal_length_unit``.
     """
+    if focal_length_unit not in FOCAL_LENGTH_UNITS:
+        msg = (
+            f"focal_length_unit must be one of {', '.join(FOCAL_LENGTH_UNITS)}, "
+            f"not {focal_length_unit!r}"
+        )
+        raise ValueError(msg)
     p = Path(path)
     with _usd_diagnostics(p):
         stage = _open_stage(p)
         try:
-            return _read(stage, p, str(path), camera, frames)
+            return _read(stage, p, str(path), camera, frames, focal_length_unit)
         except Tf.ErrorException as exc:
             msg = f"{p}: USD failed while reading the shot: {_tf_detail(exc)}"
             raise ShotFileError(msg) from None
@@ -285,36 +320,29 @@ def _read(
     source: str,
     camera: str | None,
     frames: tuple[int, int] | None,
+    focal_length_unit: str,
 ) -> Shot:
     up_axis = str(UsdGeom.GetStageUpAxis(stage))
     if up_axis not in _SUPPORTED_UP_AXES:
         msg = f"{path}: unsupported upAxis {up_axis!r}; only 'Y' and 'Z' stages can be read"
         raise ShotFileError(msg)
-    if not stage.HasAuthoredMetadata("metersPerUnit"):
-        logger.warning(
-            "%s: metersPerUnit is not authored; using USD's fallback 0.01 (centimetres)", path
-        )
-    meters_per_unit = float(UsdGeom.GetStageMetersPerUnit(stage))
-    if not (math.isfinite(meters_per_unit) and meters_per_unit > 0.0):
-        msg = f"{path}: metersPerUnit must be a positive number, not {meters_per_unit}"
-        raise ShotFileError(msg)
+    meters_per_unit = _meters_per_unit(stage, path)
 
     prim = _select_camera(stage, path, camera)
     cam_path = str(prim.GetPath())
 
-    tcps = float(stage.GetTimeCodesPerSecond())
+    tcps = _rate(stage, path, "timeCodesPerSecond", stage.GetTimeCodesPerSecond)
     fps = (
-        float(stage.GetFramesPerSecond()) if stage.HasAuthoredMetadata("framesPerSecond") else tcps
+        _rate(stage, path, "framesPerSecond", stage.GetFramesPerSecond)
+        if stage.HasAuthoredMetadata("framesPerSecond")
+        else tcps
     )
-    for name, rate in (("timeCodesPerSecond", tcps), ("framesPerSecond", fps)):
-        if not (math.isfinite(rate) and rate > 0.0):
-            msg = f"{path}: {name} must be a positive number, not {rate}"
-            raise ShotFileError(msg)
+    frame_numbers = _film_frames(stage, path, prim, frames, frames_per_code=fps / tcps)
+    time_codes = frame_numbers.astype(np.float64) * float(tcps / fps)
 
-    time_codes = _time_codes(stage, path, prim, frames, step=tcps / fps)
-    frame_numbers = np.rint(time_codes).astype(np.int64)
-
-    cam2world = _world_poses(prim, path, time_codes, frame_numbers, meters_per_unit, up_axis)
+    cam2world, shear_deg = _world_poses(
+        prim, path, time_codes, frame_numbers, meters_per_unit, up_axis
+    )
 
     cam = UsdGeom.Camera(prim)
     lens = {}
@@ -330,21 +358,94 @@ def _read(
             raise ShotFileError(msg)
         lens[name] = values
 
+    # Tenths of a scene unit -> scene units (/10) -> metres (*mpu) -> millimetres (*1000).
+    schema_mm = lens["focalLength"] * meters_per_unit * 100.0
+    focal_length_mm = schema_mm if focal_length_unit == "schema" else lens["focalLength"]
+    warnings = [
+        w
+        for w in (
+            _focal_length_warning(
+                cam_path, lens["focalLength"], focal_length_mm, meters_per_unit,
+                focal_length_unit, frame_numbers,
+            ),
+            _orthographic_warning(cam, cam_path),
+            _shear_warning(cam_path, shear_deg, frame_numbers),
+        )
+        if w
+    ]
+    for warning in warnings:
+        logger.info("%s: %s", path, warning)
+
     return Shot(
         source=source,
         camera_path=cam_path,
         frames=frame_numbers,
         time_codes=time_codes,
-        times=(time_codes - time_codes[0]) / tcps,
-        fps=fps,
+        times=(frame_numbers - frame_numbers[0]) / float(fps),
+        fps=float(fps),
         cam2world=cam2world,
-        # Tenths of a scene unit -> scene units (/10) -> metres (*mpu) -> millimetres (*1000).
-        focal_length_mm=lens["focalLength"] * meters_per_unit * 100.0,
+        focal_length_mm=focal_length_mm,
         focus_distance_m=lens["focusDistance"] * meters_per_unit,
         f_stop=lens["fStop"],
         meters_per_unit=meters_per_unit,
         up_axis=up_axis,
+        warnings=tuple(warnings),
     )
+
+
+def _metadata_number(stage: Any, key: str, typed_get: Any) -> Any:
+    """A numeric stage metadatum of any numeric type.
+
+    USD's typed getters insist on the schema's type (double); some exporters (Blender 2.93
+    writes ``metersPerUnit`` as a float in .usdc) store another numeric type, which the
+    untyped ``GetMetadata`` returns as a Python number.
+    """
+    try:
+        return typed_get()
+    except Tf.ErrorException:
+        return stage.GetMetadata(key)
+
+
+def _meters_per_unit(stage: Any, path: Path) -> float:
+    if not stage.HasAuthoredMetadata("metersPerUnit"):
+        logger.warning(
+            "%s: metersPerUnit is not authored; using USD's fallback 0.01 (centimetres)", path
+        )
+    value = _metadata_number(
+        stage, "metersPerUnit", lambda: UsdGeom.GetStageMetersPerUnit(stage)
+    )
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        msg = f"{path}: metersPerUnit must be a number, not {value!r}"
+        raise ShotFileError(msg)
+    meters_per_unit = float(value)
+    if not (math.isfinite(meters_per_unit) and meters_per_unit > 0.0):
+        msg = f"{path}: metersPerUnit must be a positive number, not {meters_per_unit}"
+        raise ShotFileError(msg)
+    return meters_per_unit
+
+
+def _rate(stage: Any, path: Path, key: str, typed_get: Any) -> Fraction:
+    """A frame or time-code rate as an exact fraction.
+
+    Whole rates stay whole; a rate within 10 ppm of an NTSC rate (24000/1001 written as
+    23.976, 29.97, 59.94 or in full) becomes that fraction, so a stage that spells the same
+    rate two ways samples every frame; anything else is taken exactly as written.
+    """
+    value = _metadata_number(stage, key, typed_get)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        msg = f"{path}: {key} must be a number, not {value!r}"
+        raise ShotFileError(msg)
+    rate = float(value)
+    if not (math.isfinite(rate) and rate > 0.0):
+        msg = f"{path}: {key} must be a positive number, not {rate}"
+        raise ShotFileError(msg)
+    whole = round(rate)
+    if whole >= 1 and abs(rate - whole) <= 1e-9 * rate:
+        return Fraction(whole)
+    ntsc = round(rate * 1.001)
+    if ntsc >= 1 and abs(rate - ntsc / 1.001) <= 1e-5 * rate:
+        return Fraction(ntsc * 1000, 1001)
+    return Fraction(rate)
 
 
 def _camera_paths(stage: Any) -> list[str]:
@@ -396,15 +497,20 @@ def _select_camera(stage: Any, path: Path, camera: str | None) -> Any:
     return prim
 
 
-def _time_codes(
+def _film_frames(
     stage: Any,
     path: Path,
     prim: Any,
     frames: tuple[int, int] | None,
     *,
-    step: float,
-) -> NDArray[np.float64]:
-    """(n,) time codes to sample: ``first, first + step, ...`` up to ``last`` inclusive."""
+    frames_per_code: Fraction,
+) -> NDArray[np.int64]:
+    """(n,) whole film frames to sample: ``first, first + 1, ..., last``.
+
+    Args:
+        frames_per_code: ``framesPerSecond / timeCodesPerSecond``: film frame = time code
+            times this.
+    """
     authored: tuple[float, float] | None
     if stage.HasAuthoredTimeCodeRange():
         authored = (float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode()))
@@ -412,48 +518,71 @@ def _time_codes(
     else:
         authored = _sample_span(prim)
         what = "animated range (the stage has no startTimeCode/endTimeCode)"
-    if authored is not None and not (authored[0] <= authored[1]):
-        msg = f"{path}: startTimeCode {_fmt(authored[0])} is after endTimeCode {_fmt(authored[1])}"
-        raise ShotFileError(msg)
+    span: tuple[int, int] | None = None
+    if authored is not None:
+        if not all(math.isfinite(t) for t in authored):
+            msg = f"{path}: the shot's {what} {_fmt(authored[0])}-{_fmt(authored[1])} is not finite"
+            raise ShotFileError(msg)
+        if not authored[0] <= authored[1]:
+            msg = (
+                f"{path}: startTimeCode {_fmt(authored[0])} is after endTimeCode "
+                f"{_fmt(authored[1])}"
+            )
+            raise ShotFileError(msg)
+        # Whole film frames inside the range (a sub-frame first key at f - 1/4 starts at f).
+        span = (
+            math.ceil(Fraction(authored[0]) * frames_per_code - _FRAME_TOL),
+            math.floor(Fraction(authored[1]) * frames_per_code + _FRAME_TOL),
+        )
+        if span[0] > span[1]:
+            msg = (
+                f"{path}: the shot's {what}, time codes {_fmt(authored[0])}-"
+                f"{_fmt(authored[1])}, holds no whole film frame"
+            )
+            raise ShotFileError(msg)
 
     if frames is None:
-        if authored is None:
+        if span is None:
             msg = (
                 f"{path}: no frame range: the stage has no startTimeCode/endTimeCode and the "
                 "camera is not animated; give the frames to read"
             )
             raise ShotFileError(msg)
-        first, last = authored
+        first, last = span
     else:
         try:
-            first, last = (float(operator.index(f)) for f in frames)
+            first, last = (operator.index(f) for f in frames)
         except (TypeError, ValueError):
             msg = f"frame range must be two integers (first, last), not {frames!r}"
             raise ShotFileError(msg) from None
         if first > last:
-            msg = f"{path}: frame range {_fmt(first)}-{_fmt(last)} is backwards (first > last)"
+            msg = f"{path}: frame range {first}-{last} is backwards (first > last)"
             raise ShotFileError(msg)
-        if authored is not None and (first < authored[0] - 1e-9 or last > authored[1] + 1e-9):
+        if span is not None and (first < span[0] or last > span[1]):
             msg = (
-                f"{path}: frames {_fmt(first)}-{_fmt(last)} are outside the shot's {what} "
-                f"{_fmt(authored[0])}-{_fmt(authored[1])}"
+                f"{path}: frames {first}-{last} are outside the shot's {what}, "
+                f"film frames {span[0]}-{span[1]}"
             )
             raise ShotFileError(msg)
-
-    steps = (last - first) / step
-    if not steps < MAX_FRAMES:  # also inf and NaN
+    count = last - first + 1
+    span_text = f"{_big(first)}-{_big(last)}"
+    if count > MAX_FRAMES:
         msg = (
-            f"{path}: time codes {first:.10g}-{last:.10g} at {step:.3g} time codes per frame "
-            f"give {steps + 1:.3g} frames, more than camtraj's maximum of {MAX_FRAMES:,}; "
-            "check startTimeCode, endTimeCode and framesPerSecond, or give --frames"
+            f"{path}: frames {span_text} are {_big(count)} film frames; camtraj reads at most "
+            f"{MAX_FRAMES} in one shot: give a shorter range (--frames)"
         )
         raise ShotFileError(msg)
-    n = math.floor(steps + 1e-9) + 1
-    return first + step * np.arange(n, dtype=np.float64)
+    if max(abs(first), abs(last)) > _MAX_FRAME_NUMBER:
+        msg = (
+            f"{path}: frames {span_text}: film frame numbers must lie within "
+            f"±{_MAX_FRAME_NUMBER} (the MCAP stores them as 32-bit integers)"
+        )
+        raise ShotFileError(msg)
+    return np.arange(first, last + 1, dtype=np.int64)
 
 
 def _sample_span(prim: Any) -> tuple[float, float] | None:
-    """First and last time sample of the transform ops of ``prim`` and its ancestors."""
+    """First and last time sample of the camera's transform (its ancestors' too) and lens."""
     times: list[float] = []
     p = prim
     while p and not p.IsPseudoRoot():
@@ -461,6 +590,9 @@ def _sample_span(prim: Any) -> tuple[float, float] | None:
         if xformable:
             times.extend(xformable.GetTimeSamples())
         p = p.GetParent()
+    cam = UsdGeom.Camera(prim)
+    for attr in (cam.GetFocalLengthAttr(), cam.GetFocusDistanceAttr(), cam.GetFStopAttr()):
+        times.extend(attr.GetTimeSamples())
     if not times:
         return None
     return min(times), max(times)
@@ -473,8 +605,13 @@ def _world_poses(
     frames: NDArray[np.int64],
     meters_per_unit: float,
     up_axis: str,
-) -> NDArray[np.float64]:
-    """(n, 4, 4) cam2world in metres, Z-up, column vectors, scale removed."""
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(n, 4, 4) cam2world in metres, Z-up, column vectors, scale removed.
+
+    Also returns (n,) the angle [deg] between the view direction a renderer uses (the
+    transform applied to the camera's -Z) and the orthonormalised pose's: non-zero only
+    under a sheared or non-uniformly scaled parent.
+    """
     n = len(time_codes)
     rows = np.empty((n, 4, 4))
     cache = UsdGeom.XformCache()
@@ -517,6 +654,9 @@ def _world_poses(
         raise ShotFileError(msg)
 
     rotation = u @ vt  # nearest rotation: the polar factor, scale and shear removed
+    rendered = linear[:, :, 2] / np.linalg.norm(linear[:, :, 2], axis=1, keepdims=True)
+    cos = np.clip(np.sum(rendered * rotation[:, :, 2], axis=1), -1.0, 1.0)
+    shear_deg = np.degrees(np.arccos(cos))
     translation = cam2stage[:, :3, 3] * meters_per_unit
     if up_axis == "Y":
         rotation = YUP2ZUP @ rotation
@@ -525,7 +665,7 @@ def _world_poses(
     cam2world[:, :3, :3] = rotation
     cam2world[:, :3, 3] = translation
     cam2world[:, 3, 3] = 1.0
-    return cam2world
+    return cam2world, shear_deg
 
 
 def _sample_attribute(attr: Any, time_codes: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -536,6 +676,65 @@ def _sample_attribute(attr: Any, time_codes: NDArray[np.float64]) -> NDArray[np.
         value = query.Get(Usd.TimeCode(float(tc)))
         values[i] = np.nan if value is None else float(value)
     return values
+
+
+def _focal_length_warning(
+    cam_path: str,
+    authored: NDArray[np.float64],
+    focal_length_mm: NDArray[np.float64],
+    meters_per_unit: float,
+    unit: str,
+    frames: NDArray[np.int64],
+) -> str | None:
+    """A note when the focal length is outside what real lenses have, saying which reading fits.
+
+    Args:
+        authored: (n,) ``focalLength`` as authored.
+        focal_length_mm: (n,) the focal length as read [mm].
+    """
+    lo, hi = _PLAUSIBLE_FOCAL_MM
+    bad = (focal_length_mm < lo) | (focal_length_mm > hi)
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad)[0])
+    value, mm = float(authored[i]), float(focal_length_mm[i])
+    where = f"at frame {int(frames[i])}"
+    plausible_raw = bool(np.all((authored >= lo) & (authored <= hi)))
+    if unit == "schema" and plausible_raw:
+        return (
+            f"camera {cam_path} focalLength {value:g} reads as {mm:g} mm {where} (USD's "
+            f"focalLength is in tenths of a scene unit, here {meters_per_unit:g} m); it is "
+            "likely millimetres written by an older exporter: try --focal-length-unit mm"
+        )
+    spelled = "millimetres" if unit == "mm" else "tenths of a scene unit"
+    return (
+        f"camera {cam_path} focal length {mm:g} mm {where} (focalLength {value:g} read as "
+        f"{spelled}) is outside the {lo:g}-{hi:g} mm of real lenses"
+    )
+
+
+def _orthographic_warning(cam: Any, cam_path: str) -> str | None:
+    projection = cam.GetProjectionAttr().Get()
+    if projection != UsdGeom.Tokens.orthographic:
+        return None
+    return (
+        f"camera {cam_path} is orthographic: no real lens gives its view; the robot follows "
+        "its pose and the focal length is only recorded"
+    )
+
+
+def _shear_warning(
+    cam_path: str, shear_deg: NDArray[np.float64], frames: NDArray[np.int64]
+) -> str | None:
+    worst = int(np.argmax(shear_deg))
+    angle = float(shear_deg[worst])
+    if not angle > _SHEAR_WARN_DEG:
+        return None
+    return (
+        f"camera {cam_path} has a sheared or non-uniformly scaled parent: the rendered view "
+        f"direction differs from the orthonormalised pose the robot follows by up to "
+        f"{angle:.1f} deg (frame {int(frames[worst])})"
+    )
 
 
 def _where(frames: NDArray[np.int64], bad: ArrayLike) -> str:
@@ -550,6 +749,11 @@ def _where(frames: NDArray[np.int64], bad: ArrayLike) -> str:
     if len(hits) > 1:
         text += f" ({len(hits)} frames in all: {frame_ranges(hits)})"
     return text
+
+
+def _big(n: int) -> str:
+    """A frame number or count as text, in short scientific form beyond 12 digits."""
+    return str(n) if abs(n) < 10**12 else f"{float(n):.3g}"
 
 
 def _fmt(value: float) -> str:

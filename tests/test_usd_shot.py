@@ -204,7 +204,7 @@ def test_times_fps_and_time_code_step(tmp_path: Path) -> None:
     shot = read_shot(_save(stage))
     assert shot.fps == 24.0
     np.testing.assert_array_equal(shot.time_codes, [0, 2, 4, 6, 8, 10])
-    np.testing.assert_array_equal(shot.frames, [0, 2, 4, 6, 8, 10])
+    np.testing.assert_array_equal(shot.frames, [0, 1, 2, 3, 4, 5])  # film frames = tc * 24/48
     np.testing.assert_allclose(shot.times, np.arange(6) / 24.0)
 
 

@@ -35,17 +35,15 @@ class Edge:
     warnings: list[str]
 
 
-class _StopMove:
-    """A ruckig move from a state to rest, per axis time-optimal (no synchronisation).
+class _Move:
+    """A ruckig state-to-state move, sampled at move times; rest at one end.
 
-    Velocity control interface: the target is zero velocity and acceleration, the stop
-    position is whatever the jerk-limited braking reaches. Each axis brakes as hard as its
-    limits allow, which is also the shortest braking distance. Only ruckig's state-to-state
-    calculation is used (offline: no control cycle, no intermediate waypoints - those call a
-    remote service).
+    Only ruckig's offline state-to-state calculation is used (no control cycle, no
+    intermediate waypoints - those call a remote service).
     """
 
-    def __init__(self, p: Array, v: Array, a: Array, limits: Limits) -> None:
+    def __init__(self, current: tuple[Array, Array, Array], target: tuple[Array, Array, Array],
+                 limits: Limits, *, stop: bool, what: str) -> None:
         from ruckig import (
             ControlInterface,
             InputParameter,
@@ -56,14 +54,13 @@ class _StopMove:
         )
 
         inp = InputParameter(N_AXES)
-        inp.control_interface = ControlInterface.Velocity
-        inp.synchronization = Synchronization.No
-        inp.current_position = [float(x) for x in p]
-        inp.current_velocity = [float(x) for x in v]
-        inp.current_acceleration = [float(x) for x in a]
-        inp.target_position = [float(x) for x in p]
-        inp.target_velocity = [0.0] * N_AXES
-        inp.target_acceleration = [0.0] * N_AXES
+        if stop:  # brake each axis as hard as it can: the shortest stop, wherever it ends
+            inp.control_interface = ControlInterface.Velocity
+            inp.synchronization = Synchronization.No
+        inp.current_position, inp.current_velocity, inp.current_acceleration = (
+            [float(x) for x in arr] for arr in current)
+        inp.target_position, inp.target_velocity, inp.target_acceleration = (
+            [float(x) for x in arr] for arr in target)
         inp.max_velocity = [float(x) for x in limits.velocity]
         inp.max_acceleration = [float(x) for x in limits.acceleration]
         inp.max_jerk = [float(x) for x in limits.jerk]
@@ -71,15 +68,16 @@ class _StopMove:
         try:
             result = Ruckig(N_AXES).calculate(inp, traj)
         except RuntimeError as exc:  # ruckig raises on invalid input
-            msg = f"ruckig could not plan a stop from the shot's boundary state: {exc}"
+            msg = f"ruckig could not plan {what}: {exc}"
             raise TimingLimitError(msg) from exc
         if result not in (Result.Working, Result.Finished):
-            msg = f"ruckig could not plan a stop from the shot's boundary state ({result})"
+            msg = f"ruckig could not plan {what} ({result})"
             raise TimingLimitError(msg)
         self._traj = traj
+        self._stop = stop
         self.duration = float(traj.duration)
-        end = traj.at_time(self.duration)
-        self.rest_position = np.array(end[0], dtype=np.float64)
+        rest = traj.at_time(self.duration)[0] if stop else current[0]
+        self.rest_position = np.array(rest, dtype=np.float64)
         # Position range of the move, exactly, from ruckig's per-axis phases (its own
         # position_extrema is not reliable with the velocity interface).
         ranges = np.array([_phase_range(prof) for prof in traj.profiles[0]])
@@ -89,9 +87,10 @@ class _StopMove:
     def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
         """Position, velocity, acceleration and jerk at move times, each (k, 8).
 
-        At and after the end of the move the state is exactly rest at the stop position.
-        Jerk is read as a short one-sided difference of the acceleration (ruckig's jerk is
-        piecewise constant; the difference is a mean of it, so never beyond the limit).
+        Beyond the move's rest end (after a stop, before a start) the state is exactly rest
+        at the rest position. Jerk is read as a short one-sided difference of the
+        acceleration (ruckig's jerk is piecewise constant; the difference is a mean of it, so
+        never beyond the limit).
         """
         k = times.size
         p = np.empty((k, N_AXES))
@@ -100,16 +99,23 @@ class _StopMove:
         j = np.zeros((k, N_AXES))
         at = self._traj.at_time
         for i, tm in enumerate(times.tolist()):
-            if tm >= self.duration:
+            if (tm >= self.duration) if self._stop else (tm <= 0.0):
                 p[i] = self.rest_position
                 continue
-            tm = max(tm, 0.0)
+            tm = min(max(tm, 0.0), self.duration)
             pi, vi, ai = at(tm)
             p[i], v[i], a[i] = pi, vi, ai
             t2 = min(tm + _JERK_STEP, self.duration)
             if t2 > tm:
                 j[i] = (np.array(at(t2)[2]) - a[i]) / (t2 - tm)
         return p, v, a, j
+
+
+def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
+    """The shortest jerk-limited stop from the state (p, v, a), per axis (not synchronised)."""
+    zero = np.zeros(N_AXES)
+    return _Move((p, v, a), (p, zero, zero), limits, stop=True,
+                 what="a stop from the shot's boundary state")
 
 
 def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
@@ -183,7 +189,7 @@ def _empty_edge(p: Array, limits: Limits, key: str) -> Edge:
 
 
 def _edge_report(
-    move: _StopMove, ticks: int, step: float, p: Array, limits: Limits, key: str, sign: float
+    move: _Move, ticks: int, step: float, p: Array, limits: Limits, key: str, sign: float
 ) -> dict[str, Any]:
     rest = move.rest_position
     return {
@@ -196,7 +202,7 @@ def _edge_report(
     }
 
 
-def _edge_position_check(move: _StopMove, limits: Limits, what: str, frame: int) -> None:
+def _edge_position_check(move: _Move, limits: Limits, what: str, frame: int) -> None:
     tol = LIMIT_RTOL * (limits.upper - limits.lower)
     over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
     if over.size == 0:
@@ -232,7 +238,7 @@ def runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int)
     """
     if _at_rest(v, a, limits):
         return _empty_edge(p, limits, "start")
-    move = _StopMove(p, -v, a, limits)
+    move = _stop_move(p, -v, a, limits)
     _edge_position_check(move, limits, "run-up", frame)
     ticks = max(1, math.ceil(move.duration / step - 1e-9))
     # Sample k (0..ticks-1) is at run-up time k*step - hold; reversed time = duration - that.
@@ -244,11 +250,35 @@ def runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int)
     return Edge(pos, -vel, acc, -jerk, report, _edge_warnings(report, limits, "run-up"))
 
 
+def runup_from(
+    start: Array, p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int
+) -> Edge:
+    """A jerk-limited move from rest at ``start`` into the first frame's state (p, v, a).
+
+    All axes arrive together (ruckig's position interface, time-synchronised). Held at rest
+    at ``start`` before it so that the first frame lands on a servo tick.
+    """
+    if start.shape != (N_AXES,) or not np.all(np.isfinite(start)):
+        msg = f"start must be {N_AXES} finite joint values, got {start.tolist()}"
+        raise ValueError(msg)
+    if np.array_equal(start, p) and _at_rest(v, a, limits):
+        return _empty_edge(p, limits, "start")
+    zero = np.zeros(N_AXES)
+    move = _Move((start, zero, zero), (p, v, a), limits, stop=False,
+                 what="the run-up from the start position")
+    _edge_position_check(move, limits, "run-up", frame)
+    ticks = max(1, math.ceil(move.duration / step - 1e-9))
+    hold = ticks * step - move.duration
+    pos, vel, acc, jerk = move.sample(np.arange(ticks, dtype=np.float64) * step - hold)
+    report = _edge_report(move, ticks, step, p, limits, "start", 1.0)
+    return Edge(pos, vel, acc, jerk, report, _edge_warnings(report, limits, "run-up"))
+
+
 def runout(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> Edge:
     """A jerk-limited stop from the last frame's state; the take ends at rest on a tick."""
     if _at_rest(v, a, limits):
         return _empty_edge(p, limits, "end")
-    move = _StopMove(p, v, a, limits)
+    move = _stop_move(p, v, a, limits)
     _edge_position_check(move, limits, "run-out", frame)
     ticks = max(1, math.ceil(move.duration / step - 1e-9))
     times = np.arange(1, ticks + 1, dtype=np.float64) * step

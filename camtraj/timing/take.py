@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.timing.edges import runout, runup, stop_slowdown
+from camtraj.timing.edges import runout, runup, runup_from, stop_slowdown
 from camtraj.timing.limits import (
     LIMIT_RTOL,
     N_AXES,
@@ -147,6 +147,7 @@ def time_shot(
     mode: str = "shot",
     rate: float = 250.0,
     frame_numbers: ArrayLike | None = None,
+    start: ArrayLike | None = None,
 ) -> Take:
     """Time a joint path for the robot: from rest, through every film frame, to rest.
 
@@ -163,6 +164,9 @@ def time_shot(
         rate: Requested servo rate [Hz].
         frame_numbers: Film frame number of every frame, shape (n,) (default 0..n-1); used in
             messages and reports.
+        start: Joint vector the robot stands at when the take begins [m, rad], shape (8,);
+            the run-up moves from it (at rest) into the first frame's state. Default: the
+            take begins at rest wherever the shortest run-up into the first frame starts.
 
     Returns:
         The :class:`Take`.
@@ -231,7 +235,11 @@ def time_shot(
 
     # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
     step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
-    up = runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
+    if start is None:
+        up = runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
+    else:
+        up = runup_from(np.asarray(start, dtype=np.float64), shot.q[0], shot.qd[0],
+                        shot.qdd[0], limits, step, frames[0])
     out = runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], limits, step, frames[-1])
 
     n_up = up.q.shape[0]
