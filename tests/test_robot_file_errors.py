@@ -185,9 +185,10 @@ def test_optional_values_keep_their_documented_defaults(tmp_path: Path, robot: R
     text = _without(_without(TEMPLATE, "ik", None), "robot", "name")
     other = Robot.from_toml(_write(tmp_path, text))
     assert other.name == "camera robot"
-    assert other.ik.objective == "smooth"
+    assert other.ik.objective == "shot"
     assert other.ik.stretch_margin == pytest.approx(robot.ik.stretch_margin)
-    np.testing.assert_allclose(other.ik.limit_margin, robot.ik.limit_margin)
+    assert other.ik.limit_margin_prismatic == pytest.approx(robot.ik.limit_margin_prismatic)
+    assert other.ik.limit_margin_revolute == pytest.approx(robot.ik.limit_margin_revolute)
 
 
 # --------------------------------------------------------------------------------------------
