@@ -484,7 +484,7 @@ class _Problem:
         at_kink = (
             k >= 0
             and math.isfinite(f_kink[k])
-            and f_kink[k] <= all_f.min()
+            and f_kink[k] <= np.min(all_f)
             and f[nk + k] >= f_kink[k]
             and f[2 * nk + k] >= f_kink[k]
         )

@@ -1029,7 +1029,7 @@ def _retime_stretch(
         acc = acc / np.maximum(ka, 1.0) * (1.0 - 1e-4)
     assert law is not None
     kv, ka = _law_ratios(path, law, limits, rate)
-    factor = max(1.0, float(kv.max()), math.sqrt(float(ka.max()))) * (1.0 + 1e-6)
+    factor = max(1.0, float(np.max(kv)), math.sqrt(float(np.max(ka)))) * (1.0 + 1e-6)
     return law.stretched(factor)
 
 
