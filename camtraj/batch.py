@@ -316,7 +316,7 @@ def _convert_one(
     try:
         from camtraj.convert import convert
 
-        summary = convert(shot, output, options, progress=False)
+        summary = convert(shot, output, options)
         # Recorded so that a later batch with other options does not skip this shot.
         write_json_atomic(Path(summary_path), {**summary, OPTIONS_KEY: options_to_json(options)})
     except CamtrajError as exc:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import sys
 from typing import Any, NoReturn
 
@@ -18,6 +19,7 @@ import camtraj
 from camtraj.batch import batch_command, write_json_atomic
 from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
+from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
@@ -30,6 +32,13 @@ def _fail(exc: CamtrajError) -> NoReturn:
 
 def _progress_wanted(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
+
+
+def _progress(shot: str, enabled: bool) -> TerminalProgress | Silent:
+    """The run's progress display, already showing that the pipeline is being loaded."""
+    progress = progress_for(os.path.basename(shot), enabled=enabled)
+    progress.stage("start")  # importing USD and the solvers takes a second or more
+    return progress
 
 
 def _options(kw: dict[str, Any]) -> ConvertOptions:
@@ -69,12 +78,13 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
-    from camtraj.convert import convert as run
-
+    progress = _progress(shot, _progress_wanted(quiet))
     try:
+        from camtraj.convert import convert as run
+
         if summary is not None:
             _check_writable(summary, "--summary")
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
+        result = run(shot, output, _options(kw), progress=progress)
         if summary is not None:
             try:
                 write_json_atomic(_path(summary), result)
@@ -83,7 +93,10 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
                 msg = f"cannot write {summary}: {exc.strerror or exc}"
                 raise InputError(msg) from exc
     except CamtrajError as exc:
+        progress.close()
         _fail(exc)
+    finally:
+        progress.close()
     if not quiet:
         click.echo(_report(result))
 
@@ -100,19 +113,23 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
     and the run-up / run-out extents. Exit code 3 when the shot cannot be done as asked.
     """
+    progress = _progress(shot, _progress_wanted(quiet or as_json))
     from camtraj.convert import convert as run
     from camtraj.timing import TimingLimitError
 
     options = None
     try:
         options = _options(kw)
-        result = run(shot, None, options, progress=_progress_wanted(quiet))
+        result = run(shot, None, options, progress=progress)
     except UnreachableFramesError as exc:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
         result = _limit_report(shot, exc, options)
     except CamtrajError as exc:
+        progress.close()
         _fail(exc)
+    finally:
+        progress.close()
     if as_json:
         click.echo(json.dumps(result, indent=2, sort_keys=True, default=_json_default))
     else:

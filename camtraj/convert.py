@@ -11,7 +11,7 @@ import json
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +25,7 @@ from camtraj.errors import InputError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.mcap_io import TakeData, write_take
 from camtraj.options import ConvertOptions
+from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
@@ -143,18 +144,18 @@ def analyse(
     shot_path: str | Path,
     options: ConvertOptions,
     *,
-    progress: Callable[[int], None] | None = None,
-    on_frames: Callable[[int], None] | None = None,
+    progress: Progress | None = None,
 ) -> Analysis:
     """Read, place, solve and time a shot. Raises the stage's typed error on failure.
 
     Args:
         shot_path: The USD shot.
         options: What to do.
-        progress: Called with the number of frames the IK just finished.
-        on_frames: Called once with the frame count before the IK starts.
+        progress: Told of each stage (``read``, ``solve`` frame by frame, ``time``).
     """
+    progress = progress or Silent()
     timings: dict[str, float] = {}
+    progress.stage("read")
     with _stage(timings, "read"):
         robot = load_robot(options)
         placement = load_placement(options)
@@ -164,15 +165,15 @@ def analyse(
             raise InputError(msg)
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
-    if on_frames is not None:
-        on_frames(int(shot.frames.shape[0]))
+    progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
         start = None if options.start_from is None else np.asarray(options.start_from, float)
         analysis.path = solve_path_report(
             robot, flange2base, start, objective=options.objective,
-            frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress,
+            frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress.advance,
         )
+    progress.stage("time")
     with _stage(timings, "timing"):
         analysis.take = time_shot(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
@@ -186,21 +187,20 @@ def convert(
     output_path: str | Path | None,
     options: ConvertOptions | None = None,
     *,
-    progress: bool = False,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
     With ``output_path`` None nothing is written (``camtraj check``). Raises ``InputError``
     (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
-    run writes nothing and leaves an existing output untouched.
+    run writes nothing and leaves an existing output untouched. ``progress`` is told of each
+    stage (see :mod:`camtraj.progress`; the CLI shows it on a terminal).
     """
     options = options or ConvertOptions()
-    bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
-    try:
-        analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
-    finally:
-        bar.close()
+    progress = progress or Silent()
+    analysis = analyse(shot_path, options, progress=progress)
     if output_path is not None:
+        progress.stage("write")
         with _stage(analysis.timings, "write"):
             write_take(output_path, take_data(analysis), analysis.robot,
                        metadata(analysis, shot_path, options))
@@ -298,30 +298,6 @@ def summary(
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }
-
-
-class _ProgressBar:
-    """A tqdm bar over the IK frames; silent unless enabled (the CLI enables it on a TTY)."""
-
-    def __init__(self, *, enabled: bool, label: str) -> None:
-        self.enabled = enabled
-        self.label = label
-        self.bar: Any = None
-
-    def start(self, total: int) -> None:
-        if self.enabled:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, desc=f"IK {self.label}", unit="frame", leave=False)
-
-    def update(self, n: int) -> None:
-        if self.bar is not None:
-            self.bar.update(n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
 __all__ = [

@@ -515,7 +515,7 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
     )
     Path(output).parent.mkdir(parents=True, exist_ok=True)
     try:
-        result: dict[str, Any] = convert(shot, output, options, progress=False)
+        result: dict[str, Any] = convert(shot, output, options)
     except CamtrajError:
         Path(output).unlink(missing_ok=True)
         Path(summary).unlink(missing_ok=True)
