@@ -78,10 +78,14 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
+    if os.path.splitext(output)[1].lower() != ".mcap":
+        click.echo(f"warning: -o {output} does not end in .mcap; it will be an MCAP file "
+                   "all the same", err=True)
     progress = _progress(shot, _progress_wanted(quiet))
     try:
         from camtraj.convert import convert as run
 
+        _check_writable(output, "-o")
         if summary is not None:
             _check_writable(summary, "--summary")
         result = run(shot, output, _options(kw), progress=progress)
@@ -193,12 +197,10 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 
 
 def _check_writable(path: str, option: str) -> None:
-    """Fail early (exit 2) when the folder of an output file does not exist."""
-    folder = _path(path).parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        msg = f"cannot write {option} {path}: folder {folder} {what}"
-        raise InputError(msg)
+    """Fail early (exit 2) when the folder of an output file cannot be made or written."""
+    from camtraj.folders import check_can_make
+
+    check_can_make(path, option)
 
 
 def _path(p: str) -> Any:

@@ -316,8 +316,8 @@ def export_openjd(
         shots: USD shot paths (distinct stems).
         job_file: Output path; JSON if it ends in ``.json``, else YAML.
         options: Convert options for every task.
-        outdir: Folder for the MCAPs and summaries (default: the job file's folder); created
-            now, as ``camtraj convert`` writes into an existing folder.
+        outdir: Folder for the MCAPs and summaries (default: the job file's folder); each
+            task makes it if missing (``camtraj convert`` does).
         relative: Paths relative to the job file's folder (see the module docstring).
         executable: The camtraj command on the render hosts.
         name: Job name.
@@ -343,7 +343,6 @@ def export_openjd(
         name=name,
     )
     _validate_openjd(template, path.resolve().parent)
-    out.mkdir(parents=True, exist_ok=True)  # camtraj convert writes into an existing folder
     if path.suffix.lower() == ".json":
         text = json.dumps(template, indent=2) + "\n"
     else:
@@ -458,7 +457,6 @@ def export_opencue(
         f"<!-- OpenCue job spec made by camtraj {__version__}: frame N converts shot N "
         f"of {manifest.name} -->\n" + ET.tostring(root, encoding="unicode") + "\n"
     )
-    out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(manifest, manifest_data)
     write_text_atomic(path, text)
     return path, manifest
@@ -513,7 +511,6 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
     )
-    Path(output).parent.mkdir(parents=True, exist_ok=True)
     try:
         result: dict[str, Any] = convert(shot, output, options)
     except CamtrajError:

@@ -26,6 +26,7 @@ import json
 import math
 import os
 import re
+import shlex
 import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import CamtrajError, InputError
+from camtraj.folders import make_parent
 from camtraj.robot import Robot
 from camtraj.urdf import link_transforms, robot_urdf, static_transforms
 
@@ -673,7 +675,7 @@ def write_take(
             speed_factor, tool_version).
 
     Raises:
-        InputError: The destination folder does not exist or cannot be written.
+        InputError: The destination folder cannot be made or written.
         ValueError: The take does not match the robot (joint names).
     """
     path = Path(path)
@@ -688,15 +690,12 @@ def write_take(
             msg = f"metadata must map strings to strings; got {key!r}: {value!r}"
             raise TypeError(msg)
     folder = path.parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        msg = f"cannot write {path}: folder {folder} {what}"
-        raise InputError(msg)
     if path.is_dir():
         msg = f"cannot write {path}: it is a folder"
         raise InputError(msg)
 
     records = _build_records(take, robot)
+    make_parent(path)  # missing folders are made, as for every output (camtraj.folders)
     tmp = folder / f".{path.name}.tmp-{os.getpid()}"
     try:
         try:
@@ -924,12 +923,32 @@ def _transform7(tr: Any) -> list[float]:
     return [v.x, v.y, v.z, r.x, r.y, r.z, r.w]
 
 
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_USD_MAGICS = {b"#usda": "USD text (usda)", b"PXR-USDC": "USD crate (usdc)"}
+
+
 def _open_for_reading(path: Path) -> IO[bytes]:
+    """Open an MCAP file; a file that is not one (a shot given by mistake) is an InputError."""
     try:
-        return path.open("rb")
+        stream = path.open("rb")
+        head = stream.read(len(_MCAP_MAGIC))
+        stream.seek(0)
     except OSError as exc:
         msg = f"cannot read {path}: {_reason(exc)}"
         raise InputError(msg) from exc
+    if head != _MCAP_MAGIC:
+        stream.close()
+        kind = next((k for m, k in _USD_MAGICS.items() if head.startswith(m)), None)
+        if kind is None and head.startswith(b"PK") and path.suffix.lower() == ".usdz":
+            kind = "USD package (usdz)"
+        if kind is not None:
+            msg = (f"{path} is a {kind} file, not an MCAP: convert it with "
+                   f"camtraj convert {shlex.quote(str(path))} -o OUT.mcap, or camtraj check "
+                   f"{shlex.quote(str(path))}")
+        else:
+            msg = f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)"
+        raise InputError(msg)
+    return stream
 
 
 def _guard(path: Path, action: Callable[[], Any]) -> Any:

@@ -154,8 +154,6 @@ def _write_bad_inputs(d: Path) -> dict[str, Bad]:
              r"missing"), "--robot", d / "missing_value.toml"),
         case("robot_out_of_range", MAYA, (r"out_of_range\.toml", r"elbow"),
              "--robot", d / "out_of_range.toml", existing=True),
-        case("output_folder_missing", MAYA, (r"no_such_folder", r"not exist|no such"),
-             output=d / "no_such_folder" / "out.mcap"),
         case("output_under_a_file", MAYA, (r"plain_file",), output=d / "plain_file" / "out.mcap"),
         case("bad_placement", MAYA, (r"placement",), "--placement", "1,2", existing=True),
         case("summary_under_a_file", MAYA, (r"plain_file|s\.json",),
