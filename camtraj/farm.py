@@ -37,7 +37,7 @@ folder at export: the one place that names an absolute location.
 Every job states the camtraj version that made it (OpenJD: ``description`` and a header comment;
 OpenCue: the ``CAMTRAJ_JOB_VERSION`` job environment variable, a comment and the manifest).
 
-The farm formats need the ``farm`` extra: ``pip install 'camtraj[farm]'``.
+The farm formats need the ``farm`` extra: ``pip install '.[farm]'`` in a camtraj clone.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ __all__ = [
     "run_task",
 ]
 
-FARM_EXTRA_MESSAGE = "install camtraj[farm] for farm export"
+FARM_EXTRA_MESSAGE = "farm export needs the farm extra: pip install '.[farm]' in a camtraj clone"
 MANIFEST_FORMAT = "camtraj-farm-tasks-1"
 JOB_DIR_ENV = "CAMTRAJ_JOB_DIR"
 VERSION_ENV = "CAMTRAJ_JOB_VERSION"

@@ -479,6 +479,7 @@ def write_long_shot(
     body = _scope("Xform", "World", [_camera_prim_trs("cam", move, "Z", 1.0, "    ")])
     text = _header(doc, "Z", 1.0, move.frames, float(fps), "World") + "\n" + body + "\n"
     out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     return out
 
