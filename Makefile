@@ -39,7 +39,10 @@ check-python:
 	fi
 
 $(STAMP): pyproject.toml | check-python
-	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV) || { rm -rf $(VENV); \
+	  echo "make: $(PYTHON) -m venv failed (on Debian/Ubuntu: apt install python3-venv); nothing was kept" >&2; exit 1; }
+	@$(BIN)/python -m pip --version >/dev/null 2>&1 || { \
+	  echo "make: $(VENV) has no pip (made without ensurepip?): run 'make clean VENV=$(VENV)', then make again" >&2; exit 1; }
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,farm]'
 	@touch $@

@@ -118,6 +118,13 @@ def test_make_refuses_a_venv_whose_python_is_gone(tmp_path: Path) -> None:
 
 
 @needs_make
+def test_make_refuses_a_half_made_venv_without_pip(tmp_path: Path) -> None:
+    venv = _venv(sys.executable, tmp_path / "venv")  # as python3 -m venv leaves it without
+    line = _make_message(_make("lint", f"VENV={venv}"))  # ensurepip (no python3-venv)
+    assert "has no pip" in line and "make clean" in line
+
+
+@needs_make
 def test_make_tells_an_explicit_python_from_the_venvs(tmp_path: Path) -> None:
     here = _version_of(sys.executable)
     venv = _venv(sys.executable, tmp_path / "venv")
