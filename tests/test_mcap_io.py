@@ -540,9 +540,9 @@ def test_read_errors(tmp_path: Path) -> None:
         read_take(tmp_path / "missing.mcap")
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"this is not an mcap file at all" * 10)
-    with pytest.raises(InputError, match="not a readable MCAP file"):
+    with pytest.raises(InputError, match=r"junk\.mcap: not an MCAP file"):
         read_take(junk)
-    with pytest.raises(InputError, match="not a readable MCAP file"):
+    with pytest.raises(InputError, match=r"junk\.mcap: not an MCAP file"):
         describe(junk)
     # A valid MCAP that is not a camtraj take.
     from mcap_ros2.writer import Writer as Ros2Writer
