@@ -132,7 +132,7 @@ class TerminalProgress:
                 self._bar.close()
                 self._bar = None
         if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join()
+            self._thread.join(timeout=1.0)  # a stalled terminal must not hang the exit
 
     def __enter__(self) -> TerminalProgress:
         return self

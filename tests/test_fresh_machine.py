@@ -61,15 +61,18 @@ def _python(version: str) -> str | None:
 
 
 def _make(*args: str) -> subprocess.CompletedProcess[str]:
+    """A fresh ``make`` in the project (not a sub-make of a ``make test`` that runs this)."""
     assert MAKE is not None
-    return subprocess.run([MAKE, "--no-print-directory", "-C", str(ROOT), *args],
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "PYTHON", "VENV", "ARGS")}
+    return subprocess.run([MAKE, "--no-print-directory", "-C", str(ROOT), *args], env=env,
                           capture_output=True, text=True, timeout=300, check=False)
 
 
 def _make_message(proc: subprocess.CompletedProcess[str]) -> str:
     """The one ``make: ...`` line of the check (make adds its own ``***`` line after it)."""
     assert proc.returncode != 0
-    ours = [ln for ln in proc.stderr.splitlines() if not ln.startswith("make: ***")]
+    ours = [ln for ln in proc.stderr.splitlines() if not re.match(r"make(\[\d+\])?: \*\*\*", ln)]
     assert len(ours) == 1, proc.stderr
     return ours[0]
 
