@@ -83,11 +83,11 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
                    "all the same", err=True)
     progress = _progress(shot, _progress_wanted(quiet))
     try:
-        from camtraj.convert import convert as run
-
         _check_writable(output, "-o")
         if summary is not None:
             _check_writable(summary, "--summary")
+        from camtraj.convert import convert as run
+
         result = run(shot, output, _options(kw), progress=progress)
         if summary is not None:
             try:
