@@ -459,7 +459,7 @@ def bench_convert(shot: Path, repeats: int, work: Path) -> dict[str, Any]:
         output = work / f"convert_{r}.mcap"
         t0 = time.perf_counter()
         try:
-            summary = convert(shot, output, options, progress=False)
+            summary = convert(shot, output, options)
         except InfeasibleError as exc:
             if default_error is not None:
                 return {"skipped": f"convert failed: {type(exc).__name__}: {exc}",

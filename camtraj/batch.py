@@ -44,6 +44,7 @@ import click
 
 from camtraj import __version__, jsonsafe
 from camtraj.errors import CamtrajError, InputError
+from camtraj.folders import check_can_make, make_parent
 from camtraj.options import (
     ConvertOptions,
     build_options,
@@ -88,9 +89,9 @@ Status = Literal["ok", "failed", "skipped"]
 def write_text_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically (:class:`camtraj.outputs.OutputSet`).
 
-    Creates missing folders. Raises InputError when it cannot be written.
+    Creates missing folders (:mod:`camtraj.folders`). Raises InputError when it cannot be
+    written.
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
     with OutputSet() as outputs:
         outputs.add(path)
         outputs.write_bytes(path, text.encode("utf-8"))
@@ -208,7 +209,9 @@ class BatchReport:
 
     Attributes:
         outdir: The output folder.
-        jobs: Worker processes used.
+        jobs: Shots converted at once, as asked (``--jobs``, default the CPU count).
+        workers: Worker processes used: at most ``jobs``, at most one per shot that needed
+            converting, 0 when every shot was up to date.
         wall_seconds: Wall time of the whole batch in [s].
         results: One result per shot, in the order the shots were given.
         options: The convert options, JSON-able.
@@ -216,6 +219,7 @@ class BatchReport:
 
     outdir: str
     jobs: int
+    workers: int
     wall_seconds: float
     results: tuple[ShotResult, ...]
     options: dict[str, Any] = field(default_factory=dict)
@@ -244,6 +248,7 @@ class BatchReport:
             "camtraj_version": __version__,
             "outdir": self.outdir,
             "jobs": self.jobs,
+            "workers": self.workers,
             "options": self.options,
             "wall_seconds": round(self.wall_seconds, 3),
             "counts": counts,
@@ -280,9 +285,18 @@ class BatchReport:
         counts = self.to_json()["counts"]
         lines.append(
             f"{counts['ok']} converted, {counts['skipped']} up to date, {counts['failed']} failed"
-            f" in {self.wall_seconds:.1f} s with {self.jobs} job(s)"
+            f" in {self.wall_seconds:.1f} s{self._jobs_text()}"
         )
         return "\n".join(lines)
+
+
+    def _jobs_text(self) -> str:
+        if self.workers == 0:
+            return " (nothing to convert)"
+        text = f" with {self.workers} job{'s' if self.workers != 1 else ''}"
+        if self.workers < self.jobs:
+            text += f" ({self.jobs} asked; {self.workers} shot(s) to convert)"
+        return text
 
 
 def _format_frames(frames: Any) -> str:
@@ -318,7 +332,7 @@ def _convert_one(
 
         # The options are recorded so that a later batch with other options does not skip
         # this shot.
-        summary = convert(shot, output, options, progress=False, summary_path=summary_path,
+        summary = convert(shot, output, options, summary_path=summary_path,
                           summary_extra={OPTIONS_KEY: options_to_json(options)})
     except CamtrajError as exc:
         outcome: dict[str, Any] = {
@@ -437,7 +451,7 @@ def run_batch(
 
     Args:
         shots: USD shot paths. Their stems must be distinct.
-        outdir: Output folder, created if missing.
+        outdir: Output folder, created with its parents if missing (:mod:`camtraj.folders`).
         jobs: Worker processes (default: the CPUs this process may use); at most one per shot.
         force: Convert every shot even if its outputs are up to date.
         options: Convert options, the same for every shot.
@@ -461,7 +475,8 @@ def run_batch(
     if jobs < 1:
         msg = f"jobs must be at least 1, got {jobs}"
         raise InputError(msg)
-    out.mkdir(parents=True, exist_ok=True)
+    check_can_make(out / REPORT_NAME, "-o")
+    make_parent(out / REPORT_NAME, "-o")
     remove_stale_temps(out)
 
     extra_inputs = [Path(p) for p in (options.robot, options.set_file) if p is not None]
@@ -497,7 +512,7 @@ def run_batch(
                 continue
         todo.append(i)
 
-    workers = max(1, min(jobs, len(todo)))
+    workers = min(jobs, len(todo))
     if todo:
         from tqdm import tqdm
 
@@ -534,7 +549,8 @@ def run_batch(
 
     report = BatchReport(
         outdir=str(out),
-        jobs=workers,
+        jobs=jobs,
+        workers=workers,
         wall_seconds=time.perf_counter() - start,
         results=tuple(r for r in results if r is not None),
         options=options_to_json(options),

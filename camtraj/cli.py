@@ -22,6 +22,7 @@ from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
 from camtraj.errors import CamtrajError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
+from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
@@ -34,6 +35,13 @@ def _fail(exc: CamtrajError) -> NoReturn:
 
 def _progress_wanted(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
+
+
+def _progress(shot: str, enabled: bool) -> TerminalProgress | Silent:
+    """The run's progress display, already showing that the pipeline is being loaded."""
+    progress = progress_for(os.path.basename(shot), enabled=enabled)
+    progress.stage("start")  # importing USD and the solvers takes a second or more
+    return progress
 
 
 def _options(kw: dict[str, Any]) -> ConvertOptions:
@@ -179,14 +187,20 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
+    if os.path.splitext(output)[1].lower() != ".mcap":
+        click.echo(f"warning: -o {output} does not end in .mcap; it will be an MCAP file "
+                   "all the same", err=True)
+    progress = _progress(shot, _progress_wanted(quiet))
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from camtraj.convert import convert as run
 
     try:
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
-                     summary_path=summary)
+        result = run(shot, output, _options(kw), progress=progress, summary_path=summary)
     except CamtrajError as exc:
+        progress.close()
         _fail(exc)
+    finally:
+        progress.close()
     if not quiet:
         click.echo(_report(result))
 
@@ -203,6 +217,7 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
     and the run-up / run-out extents. Exit code 3 when the shot cannot be done as asked.
     """
+    progress = _progress(shot, _progress_wanted(quiet or as_json))
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from camtraj.convert import convert as run
         from camtraj.timing import TimingLimitError
@@ -210,13 +225,16 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     options = None
     try:
         options = _options(kw)
-        result = run(shot, None, options, progress=_progress_wanted(quiet))
+        result = run(shot, None, options, progress=progress)
     except UnreachableFramesError as exc:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
         result = _limit_report(shot, exc, options)
     except CamtrajError as exc:
+        progress.close()
         _fail(exc)
+    finally:
+        progress.close()
     if as_json:
         click.echo(jsonsafe.dumps(result, sort_keys=True))
     else:

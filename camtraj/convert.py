@@ -11,7 +11,7 @@ import json
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +28,7 @@ from camtraj.inputs import require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
+from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
@@ -168,18 +169,18 @@ def analyse(
     shot_path: str | Path,
     options: ConvertOptions,
     *,
-    progress: Callable[[int], None] | None = None,
-    on_frames: Callable[[int], None] | None = None,
+    progress: Progress | None = None,
 ) -> Analysis:
     """Read, place, solve and time a shot. Raises the stage's typed error on failure.
 
     Args:
         shot_path: The USD shot.
         options: What to do.
-        progress: Called with the number of frames the IK just finished.
-        on_frames: Called once with the frame count before the IK starts.
+        progress: Told of each stage (``read``, ``solve`` frame by frame, ``time``).
     """
+    progress = progress or Silent()
     timings: dict[str, float] = {}
+    progress.stage("read")
     with _stage(timings, "read"):
         require_regular_files(shot_path, options)
         robot = load_robot(options)
@@ -198,14 +199,14 @@ def analyse(
             raise InputError(msg)
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
-    if on_frames is not None:
-        on_frames(int(shot.frames.shape[0]))
+    progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
         analysis.path = solve_path_report(
             robot, flange2base, start, objective=options.objective,
-            frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress,
+            frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress.advance,
         )
+    progress.stage("time")
     with _stage(timings, "timing"):
         analysis.take = time_shot(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
@@ -219,7 +220,7 @@ def convert(
     output_path: str | Path | None,
     options: ConvertOptions | None = None,
     *,
-    progress: bool = False,
+    progress: Progress | None = None,
     summary_path: str | Path | None = None,
     summary_extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
@@ -231,9 +232,11 @@ def convert(
     solve (its folder, that it is a regular file or nothing, that it is no input and not the
     other output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
     frames, axes and margins named; a failed or interrupted run writes nothing and leaves
-    existing outputs untouched.
+    existing outputs untouched. ``progress`` is told of each stage (see
+    :mod:`camtraj.progress`; the CLI shows it on a terminal).
     """
     options = options or ConvertOptions()
+    progress = progress or Silent()
     with OutputSet() as outputs:
         if output_path is not None:
             outputs.add(output_path, "-o")
@@ -242,12 +245,9 @@ def convert(
         if outputs.paths:
             require_regular_files(shot_path, options)
             outputs.refuse_inputs(run_inputs(shot_path, options))
-        bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
-        try:
-            analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
-        finally:
-            bar.close()
+        analysis = analyse(shot_path, options, progress=progress)
         if output_path is not None:
+            progress.stage("write")
             with _stage(analysis.timings, "write"), outputs.open(output_path) as stream:
                 write_take_to(stream, take_data(analysis), analysis.robot,
                               metadata(analysis, shot_path, options))
@@ -375,30 +375,6 @@ def _margins(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
         "full_stretch_deg": math.degrees(m.stretch),
         "full_stretch_frame": int(frames[m.stretch_frame]),
     }
-
-
-class _ProgressBar:
-    """A tqdm bar over the IK frames; silent unless enabled (the CLI enables it on a TTY)."""
-
-    def __init__(self, *, enabled: bool, label: str) -> None:
-        self.enabled = enabled
-        self.label = label
-        self.bar: Any = None
-
-    def start(self, total: int) -> None:
-        if self.enabled:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, desc=f"IK {self.label}", unit="frame", leave=False)
-
-    def update(self, n: int) -> None:
-        if self.bar is not None:
-            self.bar.update(n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
 __all__ = [

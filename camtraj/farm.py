@@ -41,7 +41,7 @@ folder at export: the one place that names an absolute location.
 Every job states the camtraj version that made it (OpenJD: ``description`` and a header comment;
 OpenCue: the ``CAMTRAJ_JOB_VERSION`` job environment variable, a comment and the manifest).
 
-The farm formats need the ``farm`` extra: ``pip install 'camtraj[farm]'``.
+The farm formats need the ``farm`` extra: ``pip install '.[farm]'`` in a camtraj clone.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ __all__ = [
     "run_task",
 ]
 
-FARM_EXTRA_MESSAGE = "install camtraj[farm] for farm export"
+FARM_EXTRA_MESSAGE = "farm export needs the farm extra: pip install '.[farm]' in a camtraj clone"
 MANIFEST_FORMAT = "camtraj-farm-tasks-1"
 JOB_DIR_ENV = "CAMTRAJ_JOB_DIR"
 VERSION_ENV = "CAMTRAJ_JOB_VERSION"
@@ -379,8 +379,8 @@ def export_openjd(
         shots: USD shot paths (distinct stems).
         job_file: Output path; JSON if it ends in ``.json``, else YAML.
         options: Convert options for every task.
-        outdir: Folder for the MCAPs and summaries (default: the job file's folder); created
-            now, as ``camtraj convert`` writes into an existing folder.
+        outdir: Folder for the MCAPs and summaries (default: the job file's folder); each
+            task makes it if missing (``camtraj convert`` does).
         relative: Paths relative to the job file's folder (see the module docstring).
         executable: The camtraj command on the render hosts.
         name: Job name.
@@ -406,7 +406,6 @@ def export_openjd(
         name=name,
     )
     _validate_openjd(template, path.resolve().parent)
-    out.mkdir(parents=True, exist_ok=True)  # camtraj convert writes into an existing folder
     if path.suffix.lower() == ".json":
         text = json.dumps(template, indent=2) + "\n"
     else:
@@ -521,7 +520,6 @@ def export_opencue(
         f"<!-- OpenCue job spec made by camtraj {__version__}: frame N converts shot N "
         f"of {manifest.name} -->\n" + ET.tostring(root, encoding="unicode") + "\n"
     )
-    out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(manifest, manifest_data)
     write_text_atomic(path, text)
     return path, manifest
@@ -576,9 +574,8 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
     )
-    Path(output).parent.mkdir(parents=True, exist_ok=True)
     try:  # the MCAP and the summary are one result (written together or not at all)
-        result: dict[str, Any] = convert(shot, output, options, progress=False,
+        result: dict[str, Any] = convert(shot, output, options,
                                          summary_path=summary)
     except CamtrajError:
         Path(output).unlink(missing_ok=True)

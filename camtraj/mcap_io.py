@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shlex
 import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -882,12 +883,32 @@ def _transform7(tr: Any) -> list[float]:
     return [v.x, v.y, v.z, r.x, r.y, r.z, r.w]
 
 
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_USD_MAGICS = {b"#usda": "USD text (usda)", b"PXR-USDC": "USD crate (usdc)"}
+
+
 def _open_for_reading(path: Path) -> IO[bytes]:
+    """Open an MCAP file; a file that is not one (a shot given by mistake) is an InputError."""
     try:
-        return path.open("rb")
+        stream = path.open("rb")
+        head = stream.read(len(_MCAP_MAGIC))
+        stream.seek(0)
     except OSError as exc:
         msg = f"cannot read {path}: {_reason(exc)}"
         raise InputError(msg) from exc
+    if head != _MCAP_MAGIC:
+        stream.close()
+        kind = next((k for m, k in _USD_MAGICS.items() if head.startswith(m)), None)
+        if kind is None and head.startswith(b"PK") and path.suffix.lower() == ".usdz":
+            kind = "USD package (usdz)"
+        if kind is not None:
+            msg = (f"{path} is a {kind} file, not an MCAP: convert it with "
+                   f"camtraj convert {shlex.quote(str(path))} -o OUT.mcap, or camtraj check "
+                   f"{shlex.quote(str(path))}")
+        else:
+            msg = f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)"
+        raise InputError(msg)
+    return stream
 
 
 def _guard(path: Path, action: Callable[[], Any]) -> Any:

@@ -3,7 +3,9 @@
 An :class:`OutputSet` holds every output path of a run (the MCAP, the summary, and whatever
 else a command writes). Each path is checked when it is added, before any solving:
 
-* its folder exists and can be written (a temporary file is created there right away);
+* its folder exists or can be made (missing folders are made, as `mkdir -p`, and removed
+  again if the run fails; see :mod:`camtraj.folders`); a temporary file is created there
+  right away;
 * it is a regular file or nothing (``-o /dev/null`` is refused, a device is never replaced);
 * it is not one of the run's inputs (:meth:`OutputSet.refuse_inputs`: the shot, its USD
   layers, the robot and set files), compared through symlinks, ``..`` and hard links;
@@ -51,6 +53,7 @@ from typing import BinaryIO
 
 from camtraj import interrupts
 from camtraj.errors import InputError
+from camtraj.folders import check_can_make, make_parent
 
 __all__ = ["TEMP_MARK", "OutputSet", "remove_stale_temps", "temp_name"]
 
@@ -152,6 +155,7 @@ class OutputSet:
     def __init__(self) -> None:
         self._outputs: list[_Output] = []
         self._committed = False
+        self._made_folders: list[Path] = []  # deepest first; removed again on discard
 
     # -- registering --------------------------------------------------------------------------
 
@@ -171,6 +175,7 @@ class OutputSet:
         if not out.target.name:
             msg = f"cannot write {out.what}: not a file name"
             raise InputError(msg)
+        self._make_folder(out)
         self._check_destination(out)
         for other in self._outputs:
             if self._same_destination(other, out):
@@ -225,6 +230,19 @@ class OutputSet:
             return _same_file(os.stat(a.target), os.stat(b.target))
         except OSError:
             return False
+
+    def _make_folder(self, out: _Output) -> None:
+        """Make the destination's missing folders (the rule of :mod:`camtraj.folders`)."""
+        folder = out.target.parent
+        if folder.exists():
+            return
+        check_can_make(out.target, out.label)
+        missing = []
+        while not folder.exists() and folder != folder.parent:
+            missing.append(folder)
+            folder = folder.parent
+        make_parent(out.target, out.label)
+        self._made_folders.extend(missing)
 
     @staticmethod
     def _check_destination(out: _Output) -> None:
@@ -407,6 +425,11 @@ class OutputSet:
                     with contextlib.suppress(OSError):
                         out.named.unlink()
                     out.named = None
+            if not self._committed:  # a failed run leaves no empty folder behind
+                for folder in self._made_folders:
+                    with contextlib.suppress(OSError):
+                        folder.rmdir()
+            self._made_folders = []
 
     def __enter__(self) -> OutputSet:
         return self

@@ -154,8 +154,6 @@ def _write_bad_inputs(d: Path) -> dict[str, Bad]:
              r"missing"), "--robot", d / "missing_value.toml"),
         case("robot_out_of_range", MAYA, (r"out_of_range\.toml", r"elbow"),
              "--robot", d / "out_of_range.toml", existing=True),
-        case("output_folder_missing", MAYA, (r"no_such_folder", r"not exist|no such"),
-             output=d / "no_such_folder" / "out.mcap"),
         case("output_under_a_file", MAYA, (r"plain_file",), output=d / "plain_file" / "out.mcap"),
         case("bad_placement", MAYA, (r"placement",), "--placement", "1,2", existing=True),
         case("summary_under_a_file", MAYA, (r"plain_file|s\.json",),
@@ -392,8 +390,8 @@ def test_placement_with_yaw_is_the_robot_base_pose_in_the_stage(
 
 BAD_KEYS = [
     "missing_file", "text_renamed_usd", "truncated_usdc", "no_camera", "two_cameras",
-    "nan_transform", "robot_missing_value", "robot_out_of_range", "output_folder_missing",
-    "output_under_a_file", "bad_placement", "summary_under_a_file",
+    "nan_transform", "robot_missing_value", "robot_out_of_range", "output_under_a_file",
+    "bad_placement", "summary_under_a_file",
 ]
 
 
@@ -413,7 +411,5 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(cli: CliRuns, key: s
     folder = bad.output.parent
     if folder.is_dir():
         assert leftovers(folder) == []
-    if key == "output_folder_missing":
-        assert not folder.exists()
     if key == "output_under_a_file":
         assert folder.read_text() == "not a folder\n"

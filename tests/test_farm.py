@@ -195,10 +195,10 @@ def test_missing_farm_extra_is_a_clear_error(
     options = _options()
     shot = str(SAMPLES / "blender_crane_up.usda")
     monkeypatch.setitem(sys.modules, "openjd.model", None)
-    with pytest.raises(InputError, match=r"install camtraj\[farm\] for farm export"):
+    with pytest.raises(InputError, match=r"farm export needs the farm extra: pip install"):
         farm.export_openjd([shot], tmp_path / "j.yaml", options=options)
     monkeypatch.setitem(sys.modules, "outline", None)
-    with pytest.raises(InputError, match=r"install camtraj\[farm\] for farm export"):
+    with pytest.raises(InputError, match=r"farm export needs the farm extra: pip install"):
         farm.export_opencue([shot], tmp_path / "j.xml", options=options)
     assert not list(tmp_path.iterdir())
 

@@ -1,6 +1,7 @@
 """Write the sample shots in this folder (and long benchmark shots) as USD text files.
 
-Run ``python samples/shots/make_samples.py [OUT_DIR]`` to (re)write the five samples; the
+Run ``python samples/shots/make_samples.py [OUT_DIR]`` to (re)write the five samples, or
+``--long-shot PATH [--frames N]`` to write the one-minute shot ``make bench`` converts; the
 committed ``.usda`` files are exactly what this script writes. The output is deterministic:
 plain text with every number rounded to 6 decimals, no time stamps, no USD version strings.
 
@@ -18,8 +19,8 @@ local -Z with +Y up, so in a Z-up world its rotation is ``Rz(pan - 90) @ Rx(90 +
 
 from __future__ import annotations
 
+import argparse
 import math
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -478,6 +479,7 @@ def write_long_shot(
     body = _scope("Xform", "World", [_camera_prim_trs("cam", move, "Z", 1.0, "    ")])
     text = _header(doc, "Z", 1.0, move.frames, float(fps), "World") + "\n" + body + "\n"
     out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     return out
 
@@ -495,9 +497,22 @@ def write_all(out_dir: str | Path = HERE) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command line: ``make_samples.py [OUT_DIR]`` (default: this script's folder)."""
-    args = sys.argv[1:] if argv is None else argv
-    for path in write_all(args[0] if args else HERE):
+    """Command line: ``make_samples.py [OUT_DIR] [--long-shot PATH [--frames N]]``."""
+    parser = argparse.ArgumentParser(description="Write the sample shots (and long shots).")
+    parser.add_argument("out_dir", nargs="?", default=HERE, type=Path,
+                        help="folder for the five samples (default: this script's folder)")
+    parser.add_argument("--long-shot", type=Path, metavar="PATH",
+                        help="write only the long benchmark shot to PATH (.usda), as "
+                             "`make bench` converts it")
+    parser.add_argument("--frames", type=int, default=1440, metavar="N",
+                        help="frames of the long shot at 24 fps (default 1440: one minute)")
+    args = parser.parse_args(argv)
+    if args.long_shot is not None:
+        if args.frames < 2:
+            parser.error(f"--frames must be at least 2, not {args.frames}")
+        print(write_long_shot(args.long_shot, n_frames=args.frames))
+        return 0
+    for path in write_all(args.out_dir):
         print(path)
     return 0
 
