@@ -83,6 +83,10 @@ class Shot:
         f_stop: (n,) f-number; 0 when unset (pinhole).
         meters_per_unit: The stage's ``metersPerUnit`` (scene unit length in [m]).
         up_axis: The stage's up axis, ``"Y"`` or ``"Z"``.
+        time_codes_per_second: The stage's ``timeCodesPerSecond``.
+        horizontal_aperture_mm: (n,) film back width in [mm].
+        vertical_aperture_mm: (n,) film back height in [mm].
+        clipping_range_m: (n, 2) near and far clipping distances in [m].
     """
 
     source: str
@@ -97,6 +101,10 @@ class Shot:
     f_stop: NDArray[np.float64]
     meters_per_unit: float
     up_axis: str
+    time_codes_per_second: float
+    horizontal_aperture_mm: NDArray[np.float64]
+    vertical_aperture_mm: NDArray[np.float64]
+    clipping_range_m: NDArray[np.float64]
 
     def __post_init__(self) -> None:
         n = len(self.frames)
@@ -108,6 +116,9 @@ class Shot:
             "focal_length_mm": (n,),
             "focus_distance_m": (n,),
             "f_stop": (n,),
+            "horizontal_aperture_mm": (n,),
+            "vertical_aperture_mm": (n,),
+            "clipping_range_m": (n, 2),
         }
         for name, shape in shapes.items():
             dtype = np.int64 if name == "frames" else np.float64
@@ -320,9 +331,12 @@ def _read(
         ("focalLength", cam.GetFocalLengthAttr()),
         ("focusDistance", cam.GetFocusDistanceAttr()),
         ("fStop", cam.GetFStopAttr()),
+        ("horizontalAperture", cam.GetHorizontalApertureAttr()),
+        ("verticalAperture", cam.GetVerticalApertureAttr()),
+        ("clippingRange", cam.GetClippingRangeAttr()),
     ):
-        values = _sample_attribute(attr, time_codes)
-        bad = ~np.isfinite(values)
+        values = _sample_attribute(attr, time_codes, 2 if name == "clippingRange" else 0)
+        bad = ~np.isfinite(values.reshape(len(time_codes), -1)).all(axis=1)
         if bad.any():
             msg = f"{path}: camera {cam_path} has no finite {name} {_where(frame_numbers, bad)}"
             raise ShotFileError(msg)
@@ -342,6 +356,11 @@ def _read(
         f_stop=lens["fStop"],
         meters_per_unit=meters_per_unit,
         up_axis=up_axis,
+        time_codes_per_second=tcps,
+        # Apertures are in tenths of a scene unit, like the focal length.
+        horizontal_aperture_mm=lens["horizontalAperture"] * meters_per_unit * 100.0,
+        vertical_aperture_mm=lens["verticalAperture"] * meters_per_unit * 100.0,
+        clipping_range_m=lens["clippingRange"] * meters_per_unit,
     )
 
 
@@ -518,13 +537,16 @@ def _world_poses(
     return cam2world
 
 
-def _sample_attribute(attr: Any, time_codes: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n,) values of a scalar attribute at each time code; NaN where it has no value."""
+def _sample_attribute(
+    attr: Any, time_codes: NDArray[np.float64], width: int = 0
+) -> NDArray[np.float64]:
+    """(n,) values of a scalar attribute, or (n, width) of a vector one; NaN where unset."""
     query = Usd.AttributeQuery(attr)
-    values = np.empty(len(time_codes))
+    values = np.full((len(time_codes), width) if width else len(time_codes), np.nan)
     for i, tc in enumerate(time_codes):
         value = query.Get(Usd.TimeCode(float(tc)))
-        values[i] = np.nan if value is None else float(value)
+        if value is not None:
+            values[i] = value
     return values
 
 
