@@ -61,8 +61,12 @@ def main() -> None:
 @more_convert_options
 @click.option("--summary", type=click.Path(dir_okay=False), metavar="FILE.json",
               help="Also write the run's summary as JSON.")
+@click.option("--usd", "rig_layer", type=click.Path(dir_okay=False), metavar="RIG.usda",
+              help="Also write a USD layer of the robot driving the move, to sublayer onto "
+              "the shot.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
-def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any) -> None:
+def convert(shot: str, output: str, summary: str | None, rig_layer: str | None, quiet: bool,
+            **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
 
     Every frame is solved for the robot (SM inverse kinematics), the move is timed at the
@@ -74,18 +78,23 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     try:
         if summary is not None:
             _check_writable(summary, "--summary")
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
+        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
+                     rig_layer=rig_layer)
         if summary is not None:
             try:
                 write_json_atomic(_path(summary), result)
             except OSError as exc:
                 _path(output).unlink(missing_ok=True)  # all or nothing
+                if rig_layer is not None:
+                    _path(rig_layer).unlink(missing_ok=True)
                 msg = f"cannot write {summary}: {exc.strerror or exc}"
                 raise InputError(msg) from exc
     except CamtrajError as exc:
         _fail(exc)
     if not quiet:
         click.echo(_report(result))
+        if rig_layer is not None:
+            click.echo(f"  wrote {rig_layer}")
 
 
 @main.command()

@@ -187,14 +187,20 @@ def convert(
     options: ConvertOptions | None = None,
     *,
     progress: bool = False,
+    rig_layer: str | Path | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
-    With ``output_path`` None nothing is written (``camtraj check``). Raises ``InputError``
+    With ``output_path`` None nothing is written (``camtraj check``). With ``rig_layer`` the
+    USD rig layer (:mod:`camtraj.usd_rig`) is written there too. Raises ``InputError``
     (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
     run writes nothing and leaves an existing output untouched.
     """
     options = options or ConvertOptions()
+    if rig_layer is not None:
+        from camtraj.usd_rig import check_rig_path
+
+        check_rig_path(rig_layer)
     bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
     try:
         analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
@@ -204,7 +210,24 @@ def convert(
         with _stage(analysis.timings, "write"):
             write_take(output_path, take_data(analysis), analysis.robot,
                        metadata(analysis, shot_path, options))
+    if rig_layer is not None:
+        _write_rig(analysis, rig_layer, output_path)
     return summary(analysis, shot_path, output_path, options)
+
+
+def _write_rig(analysis: Analysis, rig_layer: str | Path, output_path: str | Path | None) -> None:
+    """Write the USD rig layer; if that fails, remove the MCAP just written (all or nothing)."""
+    from camtraj.usd_rig import write_rig_layer
+
+    assert analysis.path is not None
+    with _stage(analysis.timings, "rig"):
+        try:
+            write_rig_layer(rig_layer, analysis.shot, analysis.robot,
+                            analysis.placement.base2world, analysis.path.q)
+        except BaseException:
+            if output_path is not None:
+                Path(output_path).unlink(missing_ok=True)
+            raise
 
 
 def take_data(analysis: Analysis) -> TakeData:

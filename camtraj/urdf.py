@@ -115,6 +115,28 @@ def _moving_rows(robot: Robot) -> list[tuple[int, DHRow]]:
     return out
 
 
+class JointAxis(NamedTuple):
+    """A moving joint as a frame-tree edge: ``child`` turns about / slides along the z axis
+    of ``parent`` by ``sign * q[joint]`` (``kind`` is ``"revolute"`` or ``"prismatic"``)."""
+
+    parent: str
+    child: str
+    joint: int
+    kind: str
+    sign: float
+
+
+def joint_axes(robot: Robot) -> list[JointAxis]:
+    """The moving joints in joint order, parent ``link{i-1}``, child ``<joint>_axis``."""
+    out: list[JointAxis] = []
+    for i, row in _moving_rows(robot):
+        assert row.joint is not None
+        kind = "revolute" if row.kind == "revolute" else "prismatic"
+        name = robot.joint_names[row.joint]
+        out.append(JointAxis(LINK_FRAMES[i - 1], axis_frame(name), row.joint, kind, row.sign))
+    return out
+
+
 def link_transforms(robot: Robot, q: ArrayLike) -> list[Transform]:
     """The moving-joint transforms (for ``/tf``) at joint vectors q.
 
@@ -131,11 +153,10 @@ def link_transforms(robot: Robot, q: ArrayLike) -> list[Transform]:
         msg = f"joint vectors must have {len(robot.joint_names)} values, got shape {qa.shape}"
         raise ValueError(msg)
     out: list[Transform] = []
-    for i, row in _moving_rows(robot):
-        assert row.joint is not None
-        value = row.sign * qa[..., row.joint]
-        motion = _rot_z(value) if row.kind == "revolute" else _trans_z(value)
-        out.append(Transform(LINK_FRAMES[i - 1], axis_frame(robot.joint_names[row.joint]), motion))
+    for axis in joint_axes(robot):
+        value = axis.sign * qa[..., axis.joint]
+        motion = _rot_z(value) if axis.kind == "revolute" else _trans_z(value)
+        out.append(Transform(axis.parent, axis.child, motion))
     return out
 
 
