@@ -15,7 +15,7 @@ from typing import Any, NoReturn
 import click
 
 import camtraj
-from camtraj.batch import batch_command, write_json_atomic
+from camtraj.batch import batch_command, write_json_atomic, write_text_atomic
 from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
@@ -64,9 +64,12 @@ def main() -> None:
 @click.option("--usd", "rig_layer", type=click.Path(dir_okay=False), metavar="RIG.usda",
               help="Also write a USD layer of the robot driving the move, to sublayer onto "
               "the shot.")
+@click.option("--foxglove-layout", "layout", type=click.Path(dir_okay=False),
+              metavar="FILE.json", help="Also write a Foxglove layout for the MCAP (3-D robot "
+              "and frustum, axis plots, shot frames).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
-def convert(shot: str, output: str, summary: str | None, rig_layer: str | None, quiet: bool,
-            **kw: Any) -> None:
+def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
+            layout: str | None, quiet: bool, **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
 
     Every frame is solved for the robot (SM inverse kinematics), the move is timed at the
@@ -78,23 +81,33 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None, 
     try:
         if summary is not None:
             _check_writable(summary, "--summary")
+        if layout is not None:
+            _check_writable(layout, "--foxglove-layout")
         result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
                      rig_layer=rig_layer)
+        extras: list[tuple[str, Any]] = []
         if summary is not None:
+            extras.append((summary, lambda: write_json_atomic(_path(summary), result)))
+        if layout is not None:
+            from camtraj.ros2 import foxglove_layout
+
+            extras.append((layout, lambda: write_text_atomic(_path(layout), foxglove_layout())))
+        for name, write in extras:
             try:
-                write_json_atomic(_path(summary), result)
+                write()
             except OSError as exc:
-                _path(output).unlink(missing_ok=True)  # all or nothing
-                if rig_layer is not None:
-                    _path(rig_layer).unlink(missing_ok=True)
-                msg = f"cannot write {summary}: {exc.strerror or exc}"
+                for path in (output, rig_layer):  # all or nothing
+                    if path is not None:
+                        _path(path).unlink(missing_ok=True)
+                msg = f"cannot write {name}: {exc.strerror or exc}"
                 raise InputError(msg) from exc
     except CamtrajError as exc:
         _fail(exc)
     if not quiet:
         click.echo(_report(result))
-        if rig_layer is not None:
-            click.echo(f"  wrote {rig_layer}")
+        for extra in (rig_layer, layout):
+            if extra is not None:
+                click.echo(f"  wrote {extra}")
 
 
 @main.command()

@@ -241,6 +241,9 @@ def take_data(analysis: Analysis) -> TakeData:
         target=analysis.targets, achieved=analysis.robot.camera_pose(path.q),
         focal_length_mm=shot.focal_length_mm, focus_distance_m=shot.focus_distance_m,
         f_stop=shot.f_stop, fps=shot.fps,
+        horizontal_aperture_mm=shot.horizontal_aperture_mm,
+        vertical_aperture_mm=shot.vertical_aperture_mm,
+        base2world=analysis.placement.base2world,
     )
 
 
