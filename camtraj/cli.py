@@ -171,15 +171,7 @@ def info(mcap_file: str, as_json: bool) -> None:
     ]
     lines += [f"  {t['topic']:<20} {t['type']:<40} {t['count']:>7} messages"
               for t in d["topics"]]
-    limits = d.get("limits")
-    if limits:
-        lines.append("limits used (position range, max velocity; deg for revolute axes):")
-        for i, name in enumerate(limits.get("joints", JOINT_NAMES)):
-            conv = math.degrees if REVOLUTE[i] else float
-            unit = "deg" if REVOLUTE[i] else "m"
-            lo, hi = conv(limits["lower"][i]), conv(limits["upper"][i])
-            v = conv(limits["max_velocity"][i])
-            lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
+    lines += _limits_used(d)
     click.echo("\n".join(lines))
 
 
@@ -195,6 +187,37 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 # ---------------------------------------------------------------------------------------------
 # Reports
 # ---------------------------------------------------------------------------------------------
+
+
+def _limits_used(d: dict[str, Any]) -> list[str]:
+    """``camtraj info``: what the shot used of each limit, then the robot's limits."""
+    use, ranges, limits = d.get("peak_use"), d.get("position_range") or {}, d.get("limits")
+    lines = []
+    if use:
+        lines.append("limits used (peak over the shot, % of each limit; position: 0% mid-range, "
+                     "100% at a limit):")
+        lines.append("  axis      position velocity  accel   jerk   range used")
+        for i, name in enumerate(JOINT_NAMES):
+            u = use.get(name, {})
+            conv = math.degrees if REVOLUTE[i] else float
+            unit = "deg" if REVOLUTE[i] else "m"
+            lo, hi = (conv(v) for v in ranges.get(name, (math.nan, math.nan)))
+            lines.append(
+                f"  {name:<8} {_pct(u.get('position', math.nan))}    "
+                f"{_pct(u.get('velocity', math.nan))}   {_pct(u.get('acceleration', math.nan))}"
+                f"  {_pct(u.get('jerk', math.nan))}  [{lo:9.3f}, {hi:9.3f}] {unit}"
+            )
+    else:
+        lines.append("limits used: not recorded in this file (written by an older camtraj)")
+    if limits:
+        lines.append("robot limits (position range, max velocity; deg for revolute axes):")
+        for i, name in enumerate(limits.get("joints", JOINT_NAMES)):
+            conv = math.degrees if REVOLUTE[i] else float
+            unit = "deg" if REVOLUTE[i] else "m"
+            lo, hi = conv(limits["lower"][i]), conv(limits["upper"][i])
+            v = conv(limits["max_velocity"][i])
+            lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
+    return lines
 
 
 def _check_writable(path: str, option: str) -> None:

@@ -265,6 +265,9 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "speed_factor": repr(float(take.speed_factor)),
         "servo_rate_hz": repr(float(take.rate)),
         "tool_version": f"camtraj {camtraj.__version__}",
+        # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
+        "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
+        "position_range": json.dumps(take.report.position_range, sort_keys=True),
     }
 
 

@@ -1163,7 +1163,9 @@ def describe(path: str | Path) -> dict[str, Any]:
         ``camera_prim`` (from the metadata, or None), ``frames`` (count, first, last),
         ``duration_s``, ``servo_rate_hz``, ``frame_rate_hz``, ``topics`` (list of topic,
         type, count), ``limits`` (the robot's joint names and limits, or None),
-        ``metadata`` (the ``camtraj`` record).
+        ``peak_use`` (axis -> quantity -> fraction of the limit the shot used, or None for
+        files that do not record it), ``position_range`` (axis -> [min, max] over the shot
+        [m, rad], or None), ``metadata`` (the ``camtraj`` record).
 
     Raises:
         InputError: The file cannot be read or is not MCAP.
@@ -1235,5 +1237,16 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
         "frame_rate_hz": frame_rate,
         "topics": topics,
         "limits": limits,
+        "peak_use": _json_or_none(take_md.get("peak_use")),
+        "position_range": _json_or_none(take_md.get("position_range")),
         "metadata": take_md,
     }
+
+
+def _json_or_none(text: str | None) -> Any:
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except ValueError:
+        return None
