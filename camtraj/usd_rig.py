@@ -121,13 +121,21 @@ def _author_visual(stage: Any, path: Sdf.Path, visual: Visual, units_per_m: floa
         gprim.CreatePurposeAttr(purpose)
 
 
+def _set_samples(attr: Any, time_codes: Array, values: list[Any]) -> None:
+    """One time sample per time code, authored on the layer in one change block (fast)."""
+    layer = attr.GetStage().GetEditTarget().GetLayer()
+    path = attr.GetPath()
+    with Sdf.ChangeBlock():
+        for tc, value in zip(time_codes.tolist(), values, strict=True):
+            layer.SetTimeSample(path, tc, value)
+
+
 def _set_channel(attr: Any, values: Array, time_codes: Array) -> None:
     """A constant value as the default, else a time sample at every time code."""
     if np.all(values == values[0]):
         attr.Set(_value(values[0]))
         return
-    for tc, value in zip(time_codes.tolist(), values, strict=True):
-        attr.Set(_value(value), Usd.TimeCode(tc))
+    _set_samples(attr, time_codes, [_value(v) for v in values])
 
 
 def _value(v: Any) -> Any:
@@ -219,12 +227,11 @@ def _author_joint(xform: Any, axis: Any, q: Array, time_codes: Array, units_per_
     values = axis.sign * q[:, axis.joint]
     if axis.kind == "revolute":
         op = xform.AddRotateZOp(UsdGeom.XformOp.PrecisionDouble)
-        for t, v in zip(time_codes.tolist(), np.degrees(values).tolist(), strict=True):
-            op.Set(v, Usd.TimeCode(t))
+        samples: list[Any] = np.degrees(values).tolist()
     else:
         op = xform.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
-        for t, v in zip(time_codes.tolist(), (units_per_m * values).tolist(), strict=True):
-            op.Set(Gf.Vec3d(0.0, 0.0, v), Usd.TimeCode(t))
+        samples = [Gf.Vec3d(0.0, 0.0, v) for v in (units_per_m * values).tolist()]
+    _set_samples(op.GetAttr(), time_codes, samples)
 
 
 def write_rig_layer(
