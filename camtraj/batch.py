@@ -10,6 +10,7 @@ Outputs, for a shot ``path/to/NAME.usda``:
   ``camtraj convert path/to/NAME.usda -o OUTDIR/NAME.mcap`` writes).
 - ``OUTDIR/NAME.summary.json``: the summary ``convert`` returns, plus the convert options used
   (``convert_options``).
+- ``OUTDIR/NAME.rig.usda`` with ``--usd``: the USD rig layer (``camtraj convert --usd``).
 - ``OUTDIR/batch_report.json``: one entry per shot (status ``ok``, ``failed`` or ``skipped``,
   reason, frames, max speed, time), and the batch's exit code.
 
@@ -51,6 +52,8 @@ from camtraj.options import (
     convert_options,
     more_convert_options,
     options_to_json,
+    rig_layer_flag,
+    rig_layer_for,
 )
 from camtraj.outputs import OutputSet, remove_stale_temps
 
@@ -322,7 +325,7 @@ def _format_speed(speed: Any) -> str:
 
 
 def _convert_one(
-    shot: str, output: str, summary_path: str, options: ConvertOptions
+    shot: str, output: str, summary_path: str, options: ConvertOptions, rig_layer: str | None
 ) -> dict[str, Any]:
     """Worker: convert one shot; never raises (the outcome comes back as a plain dict)."""
     start = time.perf_counter()
@@ -333,7 +336,8 @@ def _convert_one(
         # The options are recorded so that a later batch with other options does not skip
         # this shot.
         summary = convert(shot, output, options, summary_path=summary_path,
-                          summary_extra={OPTIONS_KEY: options_to_json(options)})
+                          summary_extra={OPTIONS_KEY: options_to_json(options)},
+                          rig_layer=rig_layer)
     except CamtrajError as exc:
         outcome: dict[str, Any] = {
             "status": "failed",
@@ -354,6 +358,7 @@ def _convert_one(
         # A failed shot must not leave an older result that looks current.
         Path(output).unlink(missing_ok=True)
         Path(summary_path).unlink(missing_ok=True)
+        Path(rig_layer_for(output)).unlink(missing_ok=True)
     outcome["seconds"] = time.perf_counter() - start
     outcome["cpu_seconds"] = time.process_time() - cpu_start
     return outcome
@@ -446,6 +451,7 @@ def run_batch(
     force: bool = False,
     options: ConvertOptions,
     progress: bool = False,
+    rig_layers: bool = False,
 ) -> BatchReport:
     """Convert ``shots`` into ``outdir`` in parallel and write ``outdir/batch_report.json``.
 
@@ -456,6 +462,8 @@ def run_batch(
         force: Convert every shot even if its outputs are up to date.
         options: Convert options, the same for every shot.
         progress: Show one overall tqdm progress bar on stderr.
+        rig_layers: Also write each shot's USD rig layer, ``OUTDIR/NAME.rig.usda``; a shot
+            whose rig layer is missing or older than the shot is not up to date.
 
     Returns:
         The report. Failed shots are in it; they do not raise.
@@ -496,9 +504,11 @@ def run_batch(
             )
             Path(mcap).unlink(missing_ok=True)
             Path(summary).unlink(missing_ok=True)
+            rig_layer_for(mcap).unlink(missing_ok=True)
             continue
         inputs = [Path(shot), *extra_inputs]
-        if not force and _up_to_date([mcap, summary], inputs):
+        outputs = [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
+        if not force and _up_to_date(outputs, inputs):
             previous = _read_summary(summary)
             if previous.get(OPTIONS_KEY) == wanted:
                 results[i] = ShotResult(
@@ -532,7 +542,12 @@ def run_batch(
             with _worker_environment():  # workers (and the forkserver) start on submit
                 futures = {
                     pool.submit(
-                        _convert_one, shots[i], str(names[i][0]), str(names[i][1]), options
+                        _convert_one,
+                        shots[i],
+                        str(names[i][0]),
+                        str(names[i][1]),
+                        options,
+                        str(rig_layer_for(names[i][0])) if rig_layers else None,
                     ): i
                     for i in todo
                 }
@@ -589,6 +604,7 @@ def run_batch(
 @click.option("--force", is_flag=True, help="Reconvert shots whose outputs are up to date.")
 @convert_options
 @more_convert_options
+@rig_layer_flag
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @click.pass_context
 def batch_command(
@@ -598,6 +614,7 @@ def batch_command(
     outdir: str,
     jobs: int | None,
     force: bool,
+    rig_layers: bool,
     quiet: bool,
     **option_args: Any,
 ) -> None:
@@ -616,6 +633,7 @@ def batch_command(
             force=force,
             options=options,
             progress=not quiet and sys.stderr.isatty(),
+            rig_layers=rig_layers,
         )
     except CamtrajError as exc:
         click.echo(f"ERROR: {exc}", err=True)

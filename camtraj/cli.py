@@ -179,8 +179,15 @@ def main() -> None:
 @more_convert_options
 @click.option("--summary", type=click.Path(dir_okay=False), metavar="FILE.json",
               help="Also write the run's summary as JSON.")
+@click.option("--usd", "rig_layer", type=click.Path(dir_okay=False), metavar="RIG.usda",
+              help="Also write a USD layer of the robot driving the move, to sublayer onto "
+              "the shot.")
+@click.option("--foxglove-layout", "layout", type=click.Path(dir_okay=False),
+              metavar="FILE.json", help="Also write a Foxglove layout for the MCAP (3-D robot "
+              "and frustum, axis plots, shot frames).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
-def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any) -> None:
+def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
+            layout: str | None, quiet: bool, **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
 
     Every frame is solved for the robot (SM inverse kinematics), the move is timed at the
@@ -195,7 +202,8 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
         from camtraj.convert import convert as run
 
     try:
-        result = run(shot, output, _options(kw), progress=progress, summary_path=summary)
+        result = run(shot, output, _options(kw), progress=progress, summary_path=summary,
+                     rig_layer=rig_layer, foxglove_layout=layout)
     except CamtrajError as exc:
         progress.close()
         _fail(exc)
@@ -203,6 +211,9 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
         progress.close()
     if not quiet:
         click.echo(_report(result))
+        for extra in (rig_layer, layout):
+            if extra is not None:
+                click.echo(f"  wrote {extra}")
 
 
 @main.command()
@@ -271,15 +282,7 @@ def info(mcap_file: str, as_json: bool) -> None:
     ]
     lines += [f"  {t['topic']:<20} {t['type']:<40} {t['count']:>7} messages"
               for t in d["topics"]]
-    limits = d.get("limits")
-    if limits:
-        lines.append("limits used (position range, max velocity; deg for revolute axes):")
-        for i, name in enumerate(limits.get("joints", JOINT_NAMES)):
-            conv = math.degrees if REVOLUTE[i] else float
-            unit = "deg" if REVOLUTE[i] else "m"
-            lo, hi = conv(limits["lower"][i]), conv(limits["upper"][i])
-            v = conv(limits["max_velocity"][i])
-            lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
+    lines += _limits_used(d)
     click.echo("\n".join(lines))
 
 
@@ -295,6 +298,37 @@ except ImportError:  # pragma: no cover - farm.py is part of the package
 # ---------------------------------------------------------------------------------------------
 # Reports
 # ---------------------------------------------------------------------------------------------
+
+
+def _limits_used(d: dict[str, Any]) -> list[str]:
+    """``camtraj info``: what the shot used of each limit, then the robot's limits."""
+    use, ranges, limits = d.get("peak_use"), d.get("position_range") or {}, d.get("limits")
+    lines = []
+    if use:
+        lines.append("limits used (peak over the shot, % of each limit; position: 0% mid-range, "
+                     "100% at a limit):")
+        lines.append("  axis      position velocity  accel   jerk   range used")
+        for i, name in enumerate(JOINT_NAMES):
+            u = use.get(name, {})
+            conv = math.degrees if REVOLUTE[i] else float
+            unit = "deg" if REVOLUTE[i] else "m"
+            lo, hi = (conv(v) for v in ranges.get(name, (math.nan, math.nan)))
+            lines.append(
+                f"  {name:<8} {_pct(u.get('position', math.nan))}    "
+                f"{_pct(u.get('velocity', math.nan))}   {_pct(u.get('acceleration', math.nan))}"
+                f"  {_pct(u.get('jerk', math.nan))}  [{lo:9.3f}, {hi:9.3f}] {unit}"
+            )
+    else:
+        lines.append("limits used: not recorded in this file (written by an older camtraj)")
+    if limits:
+        lines.append("robot limits (position range, max velocity; deg for revolute axes):")
+        for i, name in enumerate(limits.get("joints", JOINT_NAMES)):
+            conv = math.degrees if REVOLUTE[i] else float
+            unit = "deg" if REVOLUTE[i] else "m"
+            lo, hi = conv(limits["lower"][i]), conv(limits["upper"][i])
+            v = conv(limits["max_velocity"][i])
+            lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
+    return lines
 
 
 def _unreachable_report(shot: str, exc: UnreachableFramesError) -> dict[str, Any]:

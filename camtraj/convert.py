@@ -223,25 +223,32 @@ def convert(
     progress: Progress | None = None,
     summary_path: str | Path | None = None,
     summary_extra: Mapping[str, Any] | None = None,
+    rig_layer: str | Path | None = None,
+    foxglove_layout: str | Path | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
-    With ``output_path`` None nothing is written (``camtraj check``). With ``summary_path``
-    the summary (plus ``summary_extra``) is written there as JSON; the MCAP and the summary
-    are one result: both are replaced or neither is. Every output path is checked before the
-    solve (its folder, that it is a regular file or nothing, that it is no input and not the
-    other output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
+    With ``output_path`` None nothing is written (``camtraj check``). Every other output is
+    written with it as one result (all replaced or none): ``summary_path`` the summary (plus
+    ``summary_extra``) as JSON, ``rig_layer`` the USD rig layer (:mod:`camtraj.usd_rig`),
+    ``foxglove_layout`` a Foxglove layout for the MCAP. Every output path is checked before
+    the solve (its folder, that it is a regular file or nothing, that it is no input and not
+    another output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
     frames, axes and margins named; a failed or interrupted run writes nothing and leaves
     existing outputs untouched. ``progress`` is told of each stage (see
     :mod:`camtraj.progress`; the CLI shows it on a terminal).
     """
     options = options or ConvertOptions()
     progress = progress or Silent()
+    if rig_layer is not None:
+        from camtraj.usd_rig import check_rig_path
+
+        check_rig_path(rig_layer)
     with OutputSet() as outputs:
-        if output_path is not None:
-            outputs.add(output_path, "-o")
-        if summary_path is not None:
-            outputs.add(summary_path, "--summary")
+        for path, label in ((output_path, "-o"), (summary_path, "--summary"),
+                            (rig_layer, "--usd"), (foxglove_layout, "--foxglove-layout")):
+            if path is not None:
+                outputs.add(path, label)
         if outputs.paths:
             require_regular_files(shot_path, options)
             outputs.refuse_inputs(run_inputs(shot_path, options))
@@ -251,12 +258,28 @@ def convert(
             with _stage(analysis.timings, "write"), outputs.open(output_path) as stream:
                 write_take_to(stream, take_data(analysis), analysis.robot,
                               metadata(analysis, shot_path, options))
+        if rig_layer is not None:
+            progress.stage("rig layer")
+            with _stage(analysis.timings, "rig"):
+                outputs.write_bytes(rig_layer, _rig_bytes(analysis, rig_layer))
+        if foxglove_layout is not None:
+            from camtraj.ros2 import foxglove_layout as layout
+
+            outputs.write_bytes(foxglove_layout, layout().encode("utf-8"))
         result = summary(analysis, shot_path, output_path, options)
         if summary_path is not None:
             text = jsonsafe.dumps({**result, **(summary_extra or {})}) + "\n"
             outputs.write_bytes(summary_path, text.encode("utf-8"))
         outputs.commit()
     return result
+
+
+def _rig_bytes(analysis: Analysis, rig_layer: str | Path) -> bytes:
+    from camtraj.usd_rig import rig_layer_bytes
+
+    assert analysis.path is not None
+    return rig_layer_bytes(rig_layer, analysis.shot, analysis.robot,
+                           analysis.placement.base2world, analysis.path.q)
 
 
 def take_data(analysis: Analysis) -> TakeData:
@@ -270,6 +293,9 @@ def take_data(analysis: Analysis) -> TakeData:
         target=analysis.targets, achieved=analysis.robot.camera_pose(path.q),
         focal_length_mm=shot.focal_length_mm, focus_distance_m=shot.focus_distance_m,
         f_stop=shot.f_stop, fps=shot.fps,
+        horizontal_aperture_mm=shot.horizontal_aperture_mm,
+        vertical_aperture_mm=shot.vertical_aperture_mm,
+        base2world=analysis.placement.base2world,
     )
 
 
@@ -291,6 +317,9 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "speed_factor": repr(float(take.speed_factor)),
         "servo_rate_hz": repr(float(take.rate)),
         "tool_version": f"camtraj {camtraj.__version__}",
+        # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
+        "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
+        "position_range": json.dumps(take.report.position_range, sort_keys=True),
     }
 
 

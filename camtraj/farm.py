@@ -73,6 +73,8 @@ from camtraj.options import (
     option_values,
     options_from_json,
     options_to_json,
+    rig_layer_flag,
+    rig_layer_for,
 )
 
 __all__ = [
@@ -194,6 +196,7 @@ def openjd_template(
     relative: bool = False,
     executable: str = "camtraj",
     name: str | None = None,
+    rig_layers: bool = False,
 ) -> dict[str, Any]:
     """Build the Open Job Description job template (specification ``jobtemplate-2023-09``).
 
@@ -205,6 +208,8 @@ def openjd_template(
         relative: Write paths relative to the job file's folder.
         executable: The camtraj command on the render hosts.
         name: Job name (default: ``camtraj: N shots``).
+        rig_layers: Each task also writes the shot's USD rig layer, ``<stem>.rig.usda``
+            (task parameter ``RigLayer``).
 
     Returns:
         The template as a JSON/YAML-able dict.
@@ -283,6 +288,19 @@ def openjd_template(
         "--rate",
         "{{Param.Rate}}",
     ]
+    task_params: list[dict[str, Any]] = [
+        {"name": "Shot", "type": "PATH", "range": [_openjd_literal(spell(s)) for s in shots]},
+        {"name": "Output", "type": "PATH",
+         "range": [_openjd_literal(spell(m)) for m, _ in names]},
+        {"name": "Summary", "type": "PATH",
+         "range": [_openjd_literal(spell(j)) for _, j in names]},
+    ]
+    if rig_layers:
+        task_params.append(
+            {"name": "RigLayer", "type": "PATH",
+             "range": [_openjd_literal(spell(rig_layer_for(m))) for m, _ in names]}
+        )
+        args += ["--usd", prefix + "{{Task.Param.RigLayer}}"]
     portable = _portable(options, spell)
     for flag, value in option_values(portable):
         if flag in ("--rate", "--timing"):
@@ -315,15 +333,8 @@ def openjd_template(
                 "name": "Convert",
                 "description": "camtraj convert, one shot per task.",
                 "parameterSpace": {
-                    "taskParameterDefinitions": [
-                        {"name": "Shot", "type": "PATH",
-                         "range": [_openjd_literal(spell(s)) for s in shots]},
-                        {"name": "Output", "type": "PATH",
-                         "range": [_openjd_literal(spell(m)) for m, _ in names]},
-                        {"name": "Summary", "type": "PATH",
-                         "range": [_openjd_literal(spell(j)) for _, j in names]},
-                    ],
-                    "combination": "(Shot, Output, Summary)",
+                    "taskParameterDefinitions": task_params,
+                    "combination": "(" + ", ".join(p["name"] for p in task_params) + ")",
                 },
                 "script": {
                     "actions": {
@@ -372,6 +383,7 @@ def export_openjd(
     relative: bool = False,
     executable: str = "camtraj",
     name: str | None = None,
+    rig_layers: bool = False,
 ) -> Path:
     """Write an Open Job Description job template converting ``shots``, validated.
 
@@ -384,6 +396,7 @@ def export_openjd(
         relative: Paths relative to the job file's folder (see the module docstring).
         executable: The camtraj command on the render hosts.
         name: Job name.
+        rig_layers: Each task also writes ``<stem>.rig.usda`` (``camtraj convert --usd``).
 
     Returns:
         The job file path.
@@ -404,6 +417,7 @@ def export_openjd(
         relative=relative,
         executable=executable,
         name=name,
+        rig_layers=rig_layers,
     )
     _validate_openjd(template, path.resolve().parent)
     if path.suffix.lower() == ".json":
@@ -449,6 +463,7 @@ def export_opencue(
     name: str | None = None,
     show: str | None = None,
     shot: str | None = None,
+    rig_layers: bool = False,
 ) -> tuple[Path, Path]:
     """Write an OpenCue job spec (XML) and its task manifest converting ``shots``.
 
@@ -462,6 +477,8 @@ def export_opencue(
         name: Job name (letters, digits, ``_``; default ``camtraj_<job file stem>``).
         show: OpenCue show (default: ``$SHOW`` or outline's configured default).
         shot: OpenCue shot (default: ``$SHOT`` or outline's configured default).
+        rig_layers: Each task also writes ``<stem>.rig.usda`` (``camtraj convert --usd``);
+            the manifest entry names it as ``rig_layer``.
 
     Returns:
         The spec path and the manifest path.
@@ -483,10 +500,13 @@ def export_opencue(
     names = output_names(shots, out)
 
     portable = _portable(options, spell)
-    tasks = [
+    tasks: list[dict[str, Any]] = [
         {"frame": i, "shot": spell(s), "output": spell(m), "summary": spell(j)}
         for i, (s, (m, j)) in enumerate(zip(shots, names, strict=True), start=1)
     ]
+    if rig_layers:
+        for task, (m, _) in zip(tasks, names, strict=True):
+            task["rig_layer"] = spell(rig_layer_for(m))
     manifest_data = {
         "format": MANIFEST_FORMAT,
         "camtraj_version": __version__,
@@ -574,12 +594,15 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
     )
-    try:  # the MCAP and the summary are one result (written together or not at all)
-        result: dict[str, Any] = convert(shot, output, options,
-                                         summary_path=summary)
+    rig = os.path.normpath(base / task["rig_layer"]) if task.get("rig_layer") else None
+    try:  # the MCAP, the summary and the rig layer are one result (all written or none)
+        result: dict[str, Any] = convert(shot, output, options, summary_path=summary,
+                                         rig_layer=rig)
     except CamtrajError:
         Path(output).unlink(missing_ok=True)
         Path(summary).unlink(missing_ok=True)
+        if rig is not None:
+            Path(rig).unlink(missing_ok=True)
         raise
     return result
 
@@ -632,6 +655,7 @@ def farm_group() -> None:
 )
 @convert_options
 @more_convert_options
+@rig_layer_flag
 @click.pass_context
 def export_command(
     ctx: click.Context,
@@ -645,6 +669,7 @@ def export_command(
     name: str | None,
     show: str | None,
     cue_shot: str | None,
+    rig_layers: bool,
     **option_args: Any,
 ) -> None:
     """Write a farm job that converts SHOTS, one task per shot.
@@ -654,7 +679,8 @@ def export_command(
     opencue  a job spec XML and JOB.tasks.json beside it; frame N of its one layer
              runs: camtraj farm run-task JOB.tasks.json N
 
-    Each task writes OUTDIR/NAME.mcap and NAME.summary.json for a shot NAME.usd*.
+    Each task writes OUTDIR/NAME.mcap and NAME.summary.json for a shot NAME.usd*
+    (and NAME.rig.usda with --usd).
     """
     try:
         options = build_options(**option_args)
@@ -667,6 +693,7 @@ def export_command(
                 relative=relative_paths,
                 executable=executable,
                 name=name,
+                rig_layers=rig_layers,
             )
             click.echo(f"wrote {path} ({len(shots)} task(s)); run it here with: openjd run {path}")
         else:
@@ -680,6 +707,7 @@ def export_command(
                 name=name,
                 show=show,
                 shot=cue_shot,
+                rig_layers=rig_layers,
             )
             click.echo(f"wrote {path} and {manifest} (frames 1-{len(shots)}, one per shot)")
     except CamtrajError as exc:

@@ -10,7 +10,11 @@ Topics:
     /shot/frames        camtraj_msgs/msg/ShotFrame        one per film frame, at its take time
     /robot_description  std_msgs/msg/String               once at t = 0 (URDF)
     /tf                 tf2_msgs/msg/TFMessage            at the film frame rate (moving joints)
-    /tf_static          tf2_msgs/msg/TFMessage            once at t = 0 (fixed transforms)
+    /tf_static          tf2_msgs/msg/TFMessage            once at t = 0 (fixed transforms, with
+                                                          ``world`` -> ``base_link``: the placement)
+    /camera/camera_info sensor_msgs/msg/CameraInfo        one per film frame (the lens, in
+                                                          ``camera_optical``; see camtraj.ros2)
+Every channel carries ``offered_qos_profiles`` (:func:`camtraj.ros2.offered_qos_profiles`).
 Metadata records: ``camtraj`` (the caller's key/values) and ``camtraj.robot`` (the robot's
 joint names and limits as JSON, for ``camtraj info``).
 
@@ -27,7 +31,7 @@ import re
 import shlex
 import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import IO, Any
@@ -41,7 +45,21 @@ from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import CamtrajError, InputError
 from camtraj.robot import Robot
-from camtraj.urdf import link_transforms, robot_urdf, static_transforms
+from camtraj.ros2 import (
+    IMAGE_WIDTH,
+    camera_matrices,
+    image_heights,
+    offered_qos_profiles,
+    shot_frame_definition,
+)
+from camtraj.urdf import (
+    BASE_FRAME,
+    OPTICAL_FRAME,
+    Transform,
+    link_transforms,
+    robot_urdf,
+    static_transforms,
+)
 
 Array = NDArray[np.float64]
 
@@ -55,6 +73,9 @@ TOPIC_FRAMES = "/shot/frames"
 TOPIC_DESCRIPTION = "/robot_description"
 TOPIC_TF = "/tf"
 TOPIC_TF_STATIC = "/tf_static"
+TOPIC_CAMERA_INFO = "/camera/camera_info"
+WORLD_FRAME = "world"
+"""The tf root: the converted stage (metres, Z-up), above ``base_link`` by the placement."""
 
 #: topic -> schema name, in the order channels are registered (and same-time messages written).
 TOPICS: dict[str, str] = {
@@ -63,10 +84,13 @@ TOPICS: dict[str, str] = {
     TOPIC_TRAJECTORY: "trajectory_msgs/msg/JointTrajectory",
     TOPIC_JOINT_STATES: "sensor_msgs/msg/JointState",
     TOPIC_TF: "tf2_msgs/msg/TFMessage",
+    TOPIC_CAMERA_INFO: "sensor_msgs/msg/CameraInfo",
     TOPIC_FRAMES: "camtraj_msgs/msg/ShotFrame",
 }
 
 _CHUNK_SIZE = 1024 * 1024
+# UsdGeom.Camera's fallback film back, horizontalAperture x verticalAperture [mm].
+_USD_APERTURE_MM = (20.955, 15.2908)
 _NS = 1_000_000_000
 
 # ---------------------------------------------------------------------------------------------
@@ -108,20 +132,24 @@ _MSG_DEFS: dict[str, str] = {
     "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1",
     "geometry_msgs/Pose": "Point position\nQuaternion orientation",
     "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z",
-    "camtraj_msgs/ShotFrame": (
-        "# One solved film frame of a camtraj take (camtraj, design.md section 4).\n"
-        "# Poses are CAMERA poses (USD convention: the camera looks down its -Z, +Y up)\n"
-        "# in the robot base frame (base_link): x along the track, z up, metres.\n"
-        "int32 frame                   # film frame number from the USD time code\n"
-        "float64 time                  # seconds from the start of the take\n"
-        "string[] name                 # joint names, order of /joint_states\n"
-        "float64[] position            # the IK solution for this frame [m, rad]\n"
-        "geometry_msgs/Pose target     # requested camera pose, robot base frame\n"
-        "geometry_msgs/Pose achieved   # FK of the solution (camera pose), robot base frame\n"
-        "float64 focal_length_mm       # lens focal length [mm]\n"
-        "float64 focus_distance_m      # focus distance from the camera [m]\n"
-        "float64 f_stop                # aperture as an f-number (dimensionless)"
+    "sensor_msgs/CameraInfo": (
+        "std_msgs/Header header\n"
+        "uint32 height\n"
+        "uint32 width\n"
+        "string distortion_model\n"
+        "float64[] d\n"
+        "float64[9] k\n"
+        "float64[9] r\n"
+        "float64[12] p\n"
+        "uint32 binning_x\n"
+        "uint32 binning_y\n"
+        "RegionOfInterest roi"
     ),
+    "sensor_msgs/RegionOfInterest": (
+        "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify"
+    ),
+    # The one definition, in ros/camtraj_msgs/msg/ShotFrame.msg (shipped as package data).
+    "camtraj_msgs/ShotFrame": shot_frame_definition().removesuffix("\n"),
 }
 
 _PRIMITIVES = frozenset(
@@ -382,6 +410,38 @@ def _encode_shot_frames(take: TakeData) -> list[bytes]:
     return _split_rows(tpl.fill(values, len(take.frame_times)))
 
 
+def _encode_camera_info(take: TakeData) -> list[bytes]:
+    """One CameraInfo per film frame, stamped at its take time, in the optical frame."""
+    assert take.horizontal_aperture_mm is not None and take.vertical_aperture_mm is not None
+    n = len(take.frame_times)
+    K = camera_matrices(take.focal_length_mm, take.horizontal_aperture_mm,
+                        take.vertical_aperture_mm, IMAGE_WIDTH)
+    P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
+    tpl = _Cdr()
+    tpl.slot_time("stamp")
+    tpl.string(OPTICAL_FRAME)
+    tpl.slot("height", "<u4")
+    tpl.slot("width", "<u4")
+    tpl.string("plumb_bob")
+    tpl.slot_f64s("d", 5)
+    tpl.slot("k", "<f8", 9)
+    tpl.slot("r", "<f8", 9)
+    tpl.slot("p", "<f8", 12)
+    for _ in range(6):  # binning_x, binning_y, roi x_offset, y_offset, height, width: 0
+        tpl.u32(0)
+    tpl.buf += b"\x00"  # roi.do_rectify: false
+    values: dict[str, ArrayLike] = {
+        **_stamp_values("stamp", seconds_to_ns(take.frame_times)),
+        "height": image_heights(take.horizontal_aperture_mm, take.vertical_aperture_mm),
+        "width": np.full(n, IMAGE_WIDTH),
+        "d": np.zeros((n, 5)),
+        "k": K.reshape(n, 9),
+        "r": np.tile(np.eye(3).ravel(), (n, 1)),
+        "p": P.reshape(n, 12),
+    }
+    return _split_rows(tpl.fill(values, n))
+
+
 def _encode_string(text: str) -> bytes:
     msg = _Cdr()
     msg.string(text)
@@ -497,6 +557,12 @@ class TakeData:
         focus_distance_m: Focus distance per frame [m], shape (n,).
         f_stop: Aperture per frame (f-number), shape (n,).
         fps: Film frame rate [1/s], the /tf sampling rate.
+        horizontal_aperture_mm: Film back width per frame [mm], shape (n,); None: USD's
+            fallback (20.955 mm).
+        vertical_aperture_mm: Film back height per frame [mm], shape (n,); None: USD's
+            fallback (15.2908 mm).
+        base2world: The placement, robot base into the converted stage, shape (4, 4) [m]
+            (tf's ``world`` -> ``base_link``).
     """
 
     joint_names: tuple[str, ...]
@@ -513,6 +579,9 @@ class TakeData:
     focus_distance_m: Array
     f_stop: Array
     fps: float
+    horizontal_aperture_mm: Array | None = None
+    vertical_aperture_mm: Array | None = None
+    base2world: Array = field(default_factory=lambda: np.eye(4))
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -547,6 +616,14 @@ class TakeData:
         self._array("achieved", self.achieved, (n, 4, 4))
         for name in ("focal_length_mm", "focus_distance_m", "f_stop"):
             self._array(name, getattr(self, name), (n,))
+        for name, fallback in (("horizontal_aperture_mm", _USD_APERTURE_MM[0]),
+                               ("vertical_aperture_mm", _USD_APERTURE_MM[1])):
+            value = getattr(self, name)
+            aperture = self._array(name, np.full(n, fallback) if value is None else value, (n,))
+            if np.any(aperture <= 0):
+                msg = f"TakeData.{name} must be positive"
+                raise ValueError(msg)
+        self._array("base2world", self.base2world, (4, 4))
         fps = float(self.fps)
         if not (math.isfinite(fps) and fps > 0):
             msg = f"TakeData.fps must be a positive frame rate, got {self.fps!r}"
@@ -697,7 +774,10 @@ def _build_records(take: TakeData, robot: Robot) -> _Records:
 
     messages[TOPIC_DESCRIPTION].append((0, _encode_string(robot_urdf(robot))))
 
-    statics = static_transforms(robot)
+    statics = [
+        Transform(WORLD_FRAME, BASE_FRAME, take.base2world),
+        *static_transforms(robot),
+    ]
     messages[TOPIC_TF_STATIC] = list(
         zip(
             [0],
@@ -733,9 +813,9 @@ def _build_records(take: TakeData, robot: Robot) -> _Records:
     )
 
     if len(take.frame_times):
-        messages[TOPIC_FRAMES] = list(
-            zip(seconds_to_ns(take.frame_times).tolist(), _encode_shot_frames(take), strict=True)
-        )
+        frame_ns = seconds_to_ns(take.frame_times).tolist()
+        messages[TOPIC_FRAMES] = list(zip(frame_ns, _encode_shot_frames(take), strict=True))
+        messages[TOPIC_CAMERA_INFO] = list(zip(frame_ns, _encode_camera_info(take), strict=True))
     return _Records(messages)
 
 
@@ -756,7 +836,10 @@ def _write_mcap(
         )
     channel_ids = {
         topic: writer.register_channel(
-            topic=topic, message_encoding="cdr", schema_id=schema_ids[schema_name]
+            topic=topic,
+            message_encoding="cdr",
+            schema_id=schema_ids[schema_name],
+            metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
         )
         for topic, schema_name in TOPICS.items()
     }
@@ -1059,7 +1142,9 @@ def describe(path: str | Path) -> dict[str, Any]:
         ``camera_prim`` (from the metadata, or None), ``frames`` (count, first, last),
         ``duration_s``, ``servo_rate_hz``, ``frame_rate_hz``, ``topics`` (list of topic,
         type, count), ``limits`` (the robot's joint names and limits, or None),
-        ``metadata`` (the ``camtraj`` record).
+        ``peak_use`` (axis -> quantity -> fraction of the limit the shot used, or None for
+        files that do not record it), ``position_range`` (axis -> [min, max] over the shot
+        [m, rad], or None), ``metadata`` (the ``camtraj`` record).
 
     Raises:
         InputError: The file cannot be read or is not MCAP.
@@ -1131,5 +1216,16 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
         "frame_rate_hz": frame_rate,
         "topics": topics,
         "limits": limits,
+        "peak_use": _json_or_none(take_md.get("peak_use")),
+        "position_range": _json_or_none(take_md.get("position_range")),
         "metadata": take_md,
     }
+
+
+def _json_or_none(text: str | None) -> Any:
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except ValueError:
+        return None

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
@@ -207,6 +209,30 @@ def more_convert_options(func: F) -> F:
     for decorator in reversed(decorators):
         func = decorator(func)
     return func
+
+
+RIG_SUFFIX = ".rig.usda"
+"""File name ending of the USD rig layer that batch and farm tasks write beside NAME.mcap."""
+
+
+def rig_layer_for(mcap: str | os.PathLike[str]) -> Path:
+    """The rig layer a batch or farm task writes with ``--usd``: ``NAME.rig.usda`` beside
+    ``NAME.mcap``."""
+    path = Path(mcap)
+    return path.with_name(path.stem + RIG_SUFFIX)
+
+
+def rig_layer_flag(func: F) -> F:
+    """Click decorator adding ``--usd`` (a flag) to batch and farm export: every shot also
+    writes its USD rig layer (``camtraj convert --usd``) as ``NAME.rig.usda`` beside
+    ``NAME.mcap``. The value reaches the command as ``rig_layers``."""
+    return click.option(
+        "--usd",
+        "rig_layers",
+        is_flag=True,
+        help="Also write NAME.rig.usda beside each NAME.mcap: the robot driving the move as a "
+        "USD layer to sublayer onto the shot.",
+    )(func)
 
 
 def build_options(

@@ -17,6 +17,8 @@ Frames (parent -> child):
     link{i-1} -> <joint>_axis              moving, joint i = track, rotate, ..., roll
     <joint>_axis -> link{i}                fixed, C_i
     link8 -> camera                        fixed, camera2flange
+    camera -> camera_optical               fixed, Rx(pi): the ROS optical frame (z forward,
+                                           y down) of the USD-convention camera (-z forward)
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ Array = NDArray[np.float64]
 
 BASE_FRAME = "base_link"
 CAMERA_FRAME = "camera"
+OPTICAL_FRAME = "camera_optical"
+"""The camera's ROS optical frame (REP 103: z forward, x right, y down), for CameraInfo."""
 LINK_FRAMES: tuple[str, ...] = tuple(f"link{i}" for i in range(9))
 
 _EFFORT = "0"  # URDF requires an effort limit; camtraj does not model forces.
@@ -111,6 +115,28 @@ def _moving_rows(robot: Robot) -> list[tuple[int, DHRow]]:
     return out
 
 
+class JointAxis(NamedTuple):
+    """A moving joint as a frame-tree edge: ``child`` turns about / slides along the z axis
+    of ``parent`` by ``sign * q[joint]`` (``kind`` is ``"revolute"`` or ``"prismatic"``)."""
+
+    parent: str
+    child: str
+    joint: int
+    kind: str
+    sign: float
+
+
+def joint_axes(robot: Robot) -> list[JointAxis]:
+    """The moving joints in joint order, parent ``link{i-1}``, child ``<joint>_axis``."""
+    out: list[JointAxis] = []
+    for i, row in _moving_rows(robot):
+        assert row.joint is not None
+        kind = "revolute" if row.kind == "revolute" else "prismatic"
+        name = robot.joint_names[row.joint]
+        out.append(JointAxis(LINK_FRAMES[i - 1], axis_frame(name), row.joint, kind, row.sign))
+    return out
+
+
 def link_transforms(robot: Robot, q: ArrayLike) -> list[Transform]:
     """The moving-joint transforms (for ``/tf``) at joint vectors q.
 
@@ -127,11 +153,10 @@ def link_transforms(robot: Robot, q: ArrayLike) -> list[Transform]:
         msg = f"joint vectors must have {len(robot.joint_names)} values, got shape {qa.shape}"
         raise ValueError(msg)
     out: list[Transform] = []
-    for i, row in _moving_rows(robot):
-        assert row.joint is not None
-        value = row.sign * qa[..., row.joint]
-        motion = _rot_z(value) if row.kind == "revolute" else _trans_z(value)
-        out.append(Transform(LINK_FRAMES[i - 1], axis_frame(robot.joint_names[row.joint]), motion))
+    for axis in joint_axes(robot):
+        value = axis.sign * qa[..., axis.joint]
+        motion = _rot_z(value) if axis.kind == "revolute" else _trans_z(value)
+        out.append(Transform(axis.parent, axis.child, motion))
     return out
 
 
@@ -139,7 +164,8 @@ def static_transforms(robot: Robot) -> list[Transform]:
     """The fixed transforms (for ``/tf_static``), each ``child2parent`` of shape (4, 4).
 
     ``base_link -> link0`` (A0), ``<joint>_axis -> link{i}`` (the constant DH part) for
-    every joint, and ``link8 -> camera`` (``robot.camera2flange``).
+    every joint, ``link8 -> camera`` (``robot.camera2flange``) and ``camera ->
+    camera_optical``.
     """
     rows = robot.dh.rows()
     out = [Transform(BASE_FRAME, LINK_FRAMES[0], dh_constant(rows[0]))]
@@ -150,6 +176,7 @@ def static_transforms(robot: Robot) -> list[Transform]:
     out.append(
         Transform(LINK_FRAMES[-1], CAMERA_FRAME, np.array(robot.camera2flange, dtype=float))
     )
+    out.append(Transform(CAMERA_FRAME, OPTICAL_FRAME, np.diag([1.0, -1.0, -1.0, 1.0])))
     return out
 
 
@@ -199,13 +226,34 @@ def matrix_from_rpy(roll: float, pitch: float, yaw: float) -> Array:
 # URDF
 # ---------------------------------------------------------------------------------------------
 
-_MATERIALS: dict[str, str] = {
-    "camtraj_rail": "0.35 0.36 0.38 1",
-    "camtraj_body": "0.93 0.47 0.12 1",
-    "camtraj_joint": "0.16 0.16 0.18 1",
-    "camtraj_camera": "0.05 0.05 0.06 1",
-    "camtraj_lens": "0.20 0.32 0.55 1",
+MATERIALS: dict[str, tuple[float, float, float, float]] = {
+    "camtraj_rail": (0.35, 0.36, 0.38, 1.0),
+    "camtraj_body": (0.93, 0.47, 0.12, 1.0),
+    "camtraj_joint": (0.16, 0.16, 0.18, 1.0),
+    "camtraj_camera": (0.05, 0.05, 0.06, 1.0),
+    "camtraj_lens": (0.20, 0.32, 0.55, 1.0),
 }
+"""Material name -> RGBA colour (0-1) of the visuals."""
+
+Vec3 = tuple[float, float, float]
+
+
+class Visual(NamedTuple):
+    """One primitive solid fixed in a frame: the robot's look, shared by URDF and USD.
+
+    Attributes:
+        frame: The frame (URDF link) it is fixed in.
+        shape: ``"box"`` or ``"cylinder"`` (a cylinder runs along the frame's z axis).
+        size: Box edge lengths (x, y, z) [m]; cylinder (radius, radius, length) [m].
+        material: A key of :data:`MATERIALS`.
+        xyz: Centre of the solid in the frame [m].
+    """
+
+    frame: str
+    shape: str
+    size: Vec3
+    material: str
+    xyz: Vec3 = (0.0, 0.0, 0.0)
 
 
 def _num(x: float) -> str:
@@ -226,73 +274,66 @@ def _origin(parent: ET.Element, T: Array) -> None:
     ET.SubElement(parent, "origin", xyz=_vec(T[:3, 3]), rpy=_vec([roll, pitch, yaw]))
 
 
-def _visual(
-    link: ET.Element,
-    shape: str,
-    dims: dict[str, str],
-    material: str,
-    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
-) -> None:
-    vis = ET.SubElement(link, "visual")
-    ET.SubElement(vis, "origin", xyz=_vec(xyz), rpy=_vec(rpy))
-    geom = ET.SubElement(vis, "geometry")
-    ET.SubElement(geom, shape, dims)
-    ET.SubElement(vis, "material", name=material)
-
-
-def _box(link: ET.Element, size: tuple[float, float, float], material: str,
-         xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
-    _visual(link, "box", {"size": _vec(size)}, material, xyz)
-
-
-def _cylinder(link: ET.Element, radius: float, length: float, material: str,
-              xyz: tuple[float, float, float] = (0.0, 0.0, 0.0),
-              rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
-    """A cylinder along the link's z axis (URDF cylinders are along their local z)."""
-    _visual(link, "cylinder", {"radius": _num(radius), "length": _num(length)}, material,
-            xyz, rpy)
-
-
-def _add_visuals(robot: Robot, links: dict[str, ET.Element]) -> None:
-    """Primitive shapes in each frame; see the module docstring for where the frames sit."""
+def visuals(robot: Robot) -> list[Visual]:
+    """The primitive solids that draw the robot, frame by frame (see the module docstring)."""
     dh = robot.dh
     names = robot.joint_names
-    ax = {n: links[axis_frame(n)] for n in names}
+    ax = {n: axis_frame(n) for n in names}
     track = names.index("track")
     extend = names.index("extend")
+    out: list[Visual] = []
+
+    def box(frame: str, size: Vec3, material: str, xyz: Vec3 = (0.0, 0.0, 0.0)) -> None:
+        out.append(Visual(frame, "box", size, material, xyz))
+
+    def cylinder(frame: str, radius: float, length: float, material: str,
+                 xyz: Vec3 = (0.0, 0.0, 0.0)) -> None:
+        out.append(Visual(frame, "cylinder", (radius, radius, length), material, xyz))
 
     # Rail along the track (base x), under the carriage's travel plus some overhang.
     x0 = dh.r10 + float(robot.lower[track]) - 0.6
     x1 = dh.r10 + float(robot.upper[track]) + 0.6
-    _box(links[BASE_FRAME], (x1 - x0, 0.5, 0.08), "camtraj_rail", ((x0 + x1) / 2, 0.0, -0.14))
+    box(BASE_FRAME, (x1 - x0, 0.5, 0.08), "camtraj_rail", ((x0 + x1) / 2, 0.0, -0.14))
     # Carriage: link1 moves with the track but not with rotate (z up).
-    _box(links["link1"], (0.7, 0.8, 0.1), "camtraj_joint", (0.0, 0.0, -0.05))
+    box("link1", (0.7, 0.8, 0.1), "camtraj_joint", (0.0, 0.0, -0.05))
     # Turret ring: turns with rotate, from the carriage up to the shoulder (height r2).
-    _cylinder(ax["rotate"], 0.33, dh.r2, "camtraj_body", (0.0, 0.0, dh.r2 / 2))
+    cylinder(ax["rotate"], 0.33, dh.r2, "camtraj_body", (0.0, 0.0, dh.r2 / 2))
     # Shoulder hub on the lift axis (z of lift_axis), and the riser to the arm line (l3).
-    _cylinder(ax["lift"], 0.16, 0.42, "camtraj_joint")
+    cylinder(ax["lift"], 0.16, 0.42, "camtraj_joint")
     if dh.l3 > 0:
-        _box(ax["lift"], (0.22, dh.l3, 0.22), "camtraj_body", (0.0, -dh.l3 / 2, 0.0))
+        box(ax["lift"], (0.22, dh.l3, 0.22), "camtraj_body", (0.0, -dh.l3 / 2, 0.0))
     # Arm: outer tube along link3's z (the extension direction) with a counterweight behind.
-    _cylinder(links["link3"], 0.12, dh.r40, "camtraj_body", (0.0, 0.0, dh.r40 / 2))
-    _box(links["link3"], (0.34, 0.34, 0.45), "camtraj_joint", (0.0, 0.0, -0.3))
+    cylinder("link3", 0.12, dh.r40, "camtraj_body", (0.0, 0.0, dh.r40 / 2))
+    box("link3", (0.34, 0.34, 0.45), "camtraj_joint", (0.0, 0.0, -0.3))
     # Extension: inner tube, ending at the elbow (z = r40 in extend_axis).
     inner = max(float(robot.upper[extend]), 0.2)
-    _cylinder(ax["extend"], 0.085, inner, "camtraj_rail", (0.0, 0.0, dh.r40 - inner / 2))
+    cylinder(ax["extend"], 0.085, inner, "camtraj_rail", (0.0, 0.0, dh.r40 - inner / 2))
     # Elbow hub on the elbow axis.
-    _cylinder(ax["elbow"], 0.11, 0.28, "camtraj_joint")
+    cylinder(ax["elbow"], 0.11, 0.28, "camtraj_joint")
     # Forearm: link5's z runs from the elbow to the wrist centre (r6).
-    _cylinder(links["link5"], 0.075, dh.r6, "camtraj_body", (0.0, 0.0, dh.r6 / 2))
+    cylinder("link5", 0.075, dh.r6, "camtraj_body", (0.0, 0.0, dh.r6 / 2))
     # Pan housing just above the wrist centre, turning with pan about the forearm.
-    _box(ax["pan"], (0.17, 0.17, 0.14), "camtraj_joint", (0.0, 0.0, max(dh.r6 - 0.17, 0.0)))
+    box(ax["pan"], (0.17, 0.17, 0.14), "camtraj_joint", (0.0, 0.0, max(dh.r6 - 0.17, 0.0)))
     # Tilt hub on the tilt axis at the wrist centre.
-    _cylinder(ax["tilt"], 0.065, 0.24, "camtraj_body")
+    cylinder(ax["tilt"], 0.065, 0.24, "camtraj_body")
     # Roll flange: a disc on the flange (link8) z.
-    _cylinder(links["link8"], 0.075, 0.03, "camtraj_joint", (0.0, 0.0, 0.015))
+    cylinder("link8", 0.075, 0.03, "camtraj_joint", (0.0, 0.0, 0.015))
     # Camera: body around the nodal point, lens along the view direction (camera -z).
-    _box(links[CAMERA_FRAME], (0.12, 0.14, 0.22), "camtraj_camera", (0.0, 0.0, 0.02))
-    _cylinder(links[CAMERA_FRAME], 0.045, 0.12, "camtraj_lens", (0.0, 0.0, -0.15))
+    box(CAMERA_FRAME, (0.12, 0.14, 0.22), "camtraj_camera", (0.0, 0.0, 0.02))
+    cylinder(CAMERA_FRAME, 0.045, 0.12, "camtraj_lens", (0.0, 0.0, -0.15))
+    return out
+
+
+def _add_visual(link: ET.Element, visual: Visual) -> None:
+    vis = ET.SubElement(link, "visual")
+    ET.SubElement(vis, "origin", xyz=_vec(visual.xyz), rpy=_vec((0.0, 0.0, 0.0)))
+    geom = ET.SubElement(vis, "geometry")
+    if visual.shape == "box":
+        ET.SubElement(geom, "box", {"size": _vec(visual.size)})
+    else:
+        ET.SubElement(geom, "cylinder",
+                      {"radius": _num(visual.size[0]), "length": _num(visual.size[2])})
+    ET.SubElement(vis, "material", name=visual.material)
 
 
 def robot_urdf(robot: Robot) -> str:
@@ -302,9 +343,9 @@ def robot_urdf(robot: Robot) -> str:
     roll) with the robot's position limits [m, rad] and velocity limits [m/s, rad/s].
     """
     root = ET.Element("robot", name=robot.name)
-    for name, rgba in _MATERIALS.items():
+    for name, rgba in MATERIALS.items():
         mat = ET.SubElement(root, "material", name=name)
-        ET.SubElement(mat, "color", rgba=rgba)
+        ET.SubElement(mat, "color", rgba=" ".join(f"{c:g}" for c in rgba))
 
     links: dict[str, ET.Element] = {}
 
@@ -318,7 +359,9 @@ def robot_urdf(robot: Robot) -> str:
         add_link(axis_frame(robot.joint_names[row.joint]))
         add_link(LINK_FRAMES[i])
     add_link(CAMERA_FRAME)
-    _add_visuals(robot, links)
+    add_link(OPTICAL_FRAME)
+    for visual in visuals(robot):
+        _add_visual(links[visual.frame], visual)
 
     def add_fixed(tr: Transform) -> None:
         joint = ET.SubElement(root, "joint", name=f"{tr.parent}_to_{tr.child}", type="fixed")
@@ -348,6 +391,7 @@ def robot_urdf(robot: Robot) -> str:
         )
         add_fixed(statics[LINK_FRAMES[i]])
     add_fixed(statics[CAMERA_FRAME])
+    add_fixed(statics[OPTICAL_FRAME])
 
     ET.indent(root, space="  ")
     body = ET.tostring(root, encoding="unicode")

@@ -108,6 +108,10 @@ class Shot:
         up_axis: The stage's up axis, ``"Y"`` or ``"Z"``.
         warnings: One-line notes about the shot that do not stop it (an implausible focal
             length, an orthographic camera, a sheared parent).
+        time_codes_per_second: The stage's ``timeCodesPerSecond``.
+        horizontal_aperture_mm: (n,) film back width in [mm].
+        vertical_aperture_mm: (n,) film back height in [mm].
+        clipping_range_m: (n, 2) near and far clipping distances in [m].
     """
 
     source: str
@@ -122,6 +126,10 @@ class Shot:
     f_stop: NDArray[np.float64]
     meters_per_unit: float
     up_axis: str
+    time_codes_per_second: float
+    horizontal_aperture_mm: NDArray[np.float64]
+    vertical_aperture_mm: NDArray[np.float64]
+    clipping_range_m: NDArray[np.float64]
     warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -134,6 +142,9 @@ class Shot:
             "focal_length_mm": (n,),
             "focus_distance_m": (n,),
             "f_stop": (n,),
+            "horizontal_aperture_mm": (n,),
+            "vertical_aperture_mm": (n,),
+            "clipping_range_m": (n, 2),
         }
         for name, shape in shapes.items():
             dtype = np.int64 if name == "frames" else np.float64
@@ -350,17 +361,24 @@ def _read(
         ("focalLength", cam.GetFocalLengthAttr()),
         ("focusDistance", cam.GetFocusDistanceAttr()),
         ("fStop", cam.GetFStopAttr()),
+        ("horizontalAperture", cam.GetHorizontalApertureAttr()),
+        ("verticalAperture", cam.GetVerticalApertureAttr()),
+        ("clippingRange", cam.GetClippingRangeAttr()),
     ):
-        values = _sample_attribute(attr, time_codes)
-        bad = ~np.isfinite(values)
+        values = _sample_attribute(attr, time_codes, 2 if name == "clippingRange" else 0)
+        bad = ~np.isfinite(values.reshape(len(time_codes), -1)).all(axis=1)
         if bad.any():
             msg = f"{path}: camera {cam_path} has no finite {name} {_where(frame_numbers, bad)}"
             raise ShotFileError(msg)
         lens[name] = values
 
     # Tenths of a scene unit -> scene units (/10) -> metres (*mpu) -> millimetres (*1000).
-    schema_mm = lens["focalLength"] * meters_per_unit * 100.0
-    focal_length_mm = schema_mm if focal_length_unit == "schema" else lens["focalLength"]
+    def to_mm(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        if focal_length_unit == "mm":
+            return values
+        return values * (meters_per_unit * 100.0)
+
+    focal_length_mm = to_mm(lens["focalLength"])
     warnings = [
         w
         for w in (
@@ -390,6 +408,11 @@ def _read(
         meters_per_unit=meters_per_unit,
         up_axis=up_axis,
         warnings=tuple(warnings),
+        time_codes_per_second=float(tcps),
+        # Apertures are in the focal length's unit (tenths of a scene unit, or millimetres).
+        horizontal_aperture_mm=to_mm(lens["horizontalAperture"]),
+        vertical_aperture_mm=to_mm(lens["verticalAperture"]),
+        clipping_range_m=lens["clippingRange"] * meters_per_unit,
     )
 
 
@@ -668,13 +691,16 @@ def _world_poses(
     return cam2world, shear_deg
 
 
-def _sample_attribute(attr: Any, time_codes: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n,) values of a scalar attribute at each time code; NaN where it has no value."""
+def _sample_attribute(
+    attr: Any, time_codes: NDArray[np.float64], width: int = 0
+) -> NDArray[np.float64]:
+    """(n,) values of a scalar attribute, or (n, width) of a vector one; NaN where unset."""
     query = Usd.AttributeQuery(attr)
-    values = np.empty(len(time_codes))
+    values = np.full((len(time_codes), width) if width else len(time_codes), np.nan)
     for i, tc in enumerate(time_codes):
         value = query.Get(Usd.TimeCode(float(tc)))
-        values[i] = np.nan if value is None else float(value)
+        if value is not None:
+            values[i] = value
     return values
 
 

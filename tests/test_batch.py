@@ -223,3 +223,25 @@ def test_malformed_options_are_input_errors() -> None:
     assert options_to_args(more)[-4:] == [
         "--start-from", "1.0,90.0,0.0,0.0,-90.0,0.0,0.0,0.0", "--objective", "paper",
     ]  # fmt: skip
+
+
+def test_usd_flag_writes_rig_layers_and_counts_them_in_up_to_date(tmp_path: Path) -> None:
+    from pxr import Usd, UsdGeom
+
+    out = tmp_path / "out"
+    shots = [str(SAMPLES / f"{name}.usda") for name in (*FEASIBLE[:2], "unreachable")]
+    proc = _run("batch", *shots, "-o", str(out), "--jobs", "2", "--usd", "--quiet")
+    assert proc.returncode == 3, proc.stderr
+    for name in FEASIBLE[:2]:
+        stage = Usd.Stage.Open(str(out / f"{name}.rig.usda"))
+        assert [p.GetName() for p in stage.Traverse() if p.IsA(UsdGeom.Camera)] == [
+            "camtraj_camera"
+        ]
+    assert not (out / "unreachable.rig.usda").exists()
+    options = build_options(
+        camera=None, robot=None, placement=None, frames=None, rate=250.0, timing="shot"
+    )
+    (out / f"{FEASIBLE[0]}.rig.usda").unlink()
+    report = run_batch(shots[:2], out, jobs=1, options=options, rig_layers=True)
+    assert [r.status for r in report.results] == ["ok", "skipped"]
+    assert (out / f"{FEASIBLE[0]}.rig.usda").is_file()

@@ -319,7 +319,8 @@ def test_info_lists_topics_and_frame_range(cli: CliRuns) -> None:
     lines = proc.stdout.splitlines()
     take = read_take(mcap)
     counts = {"/joint_states": take.t.size, "/shot/frames": 120, "/joint_trajectory": 1,
-              "/robot_description": 1, "/tf_static": 1, "/tf": take.tf_times.size}
+              "/robot_description": 1, "/tf_static": 1, "/tf": take.tf_times.size,
+              "/camera/camera_info": 120}
     for topic, type_name in TOPICS.items():
         hits = [ln for ln in lines if re.search(rf"(^|\s){re.escape(topic)}\s", ln)]
         assert len(hits) == 1, (topic, proc.stdout)
@@ -327,6 +328,30 @@ def test_info_lists_topics_and_frame_range(cli: CliRuns) -> None:
         assert re.search(rf"\b{counts[topic]} messages", hits[0]), hits[0]
     assert "1001-1120" in proc.stdout
     assert re.search(r"\b120 frames\b", proc.stdout)
+
+
+def test_info_says_what_the_shot_used(cli: CliRuns) -> None:
+    """Under "limits used": the shot's peak use per axis (as convert reported it)."""
+    assert cli.procs["placed"].returncode == 0, cli.procs["placed"].stderr
+    proc = run_cli("info", cli.base / "placed.mcap")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("limits used"))
+    rows = lines[head + 2 : head + 2 + len(JOINT_NAMES)]
+    summary = json.loads((cli.base / "placed.summary.json").read_text())
+    take = read_take(cli.base / "placed.mcap")
+    robot = Robot.default()
+    shot = (take.t >= take.frame_times[0] - 1e-9) & (take.t <= take.frame_times[-1] + 1e-9)
+    for i, (name, row) in enumerate(zip(JOINT_NAMES, rows, strict=True)):
+        assert row.split()[0] == name
+        percents = [int(p.rstrip("%")) for p in row.split()[1:5]]
+        use = summary["peak_use"][name]
+        want = [round(100 * use[k]) for k in ("position", "velocity", "acceleration", "jerk")]
+        assert percents == want, row
+        # Independently: the velocity use from the written samples and the robot's limit.
+        peak_v = np.abs(take.qd[shot, i]).max() / robot.max_velocity[i]
+        assert percents[1] == pytest.approx(100 * peak_v, abs=1.0), row
+    assert "robot limits" in proc.stdout
 
 
 @pytest.mark.parametrize(

@@ -237,3 +237,32 @@ def test_every_convert_option_reaches_the_openjd_task(tmp_path: Path) -> None:
     args = template["steps"][0]["script"]["actions"]["onRun"]["args"]
     assert args[args.index("--robot") + 1] == "{{Param.JobDir}}/{{Param.Robot}}"
     assert _openjd("check", str(job)).returncode == 0
+
+
+def _rig_camera_count(path: Path) -> int:
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(path))
+    return sum(1 for p in stage.Traverse() if p.IsA(UsdGeom.Camera))
+
+
+def test_usd_rig_layers_in_openjd_and_opencue_jobs(project: Path, tmp_path: Path) -> None:
+    shot = str(project / "shots" / "orbit.usda")
+    job = project / "jobs" / "rig.yaml"
+    proc = _run("farm", "export", "--format", "openjd", shot, "-o", str(job), *FRAMES,
+                "--outdir", str(project / "jd"), "--usd")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    space = yaml.safe_load(job.read_text())["steps"][0]["parameterSpace"]
+    assert space["combination"] == "(Shot, Output, Summary, RigLayer)"
+    run = _openjd("run", str(job), cwd=project)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr
+    assert _rig_camera_count(project / "jd" / "orbit.rig.usda") == 1
+
+    spec = project / "jobs" / "rig.xml"
+    farm.export_opencue([shot], spec, options=_options(frames="1:12"), outdir=project / "cue",
+                        rig_layers=True)  # fmt: skip
+    _, commands, env = _frame_commands(spec)
+    run2 = subprocess.run(commands[0], shell=True, cwd=tmp_path, env={**_env(), **env},
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert run2.returncode == 0, run2.stderr
+    assert _rig_camera_count(project / "cue" / "orbit.rig.usda") == 1

@@ -15,7 +15,7 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import NDArray
 
-from camtraj import mcap_io
+from camtraj import mcap_io, ros2
 from camtraj.errors import InputError
 from camtraj.mcap_io import (
     TOPICS,
@@ -31,7 +31,14 @@ from camtraj.mcap_io import (
     write_take,
 )
 from camtraj.robot import JOINT_NAMES, Robot
-from camtraj.urdf import BASE_FRAME, CAMERA_FRAME, LINK_FRAMES, robot_urdf, static_transforms
+from camtraj.urdf import (
+    BASE_FRAME,
+    CAMERA_FRAME,
+    LINK_FRAMES,
+    Transform,
+    robot_urdf,
+    static_transforms,
+)
 
 Array = NDArray[np.float64]
 
@@ -46,6 +53,11 @@ METADATA = {
     "speed_factor": "1.0",
     "tool_version": "camtraj 0.1.0",
 }
+
+
+PLACEMENT = np.array(
+    [[0.0, -1.0, 0.0, 2.0], [1.0, 0.0, 0.0, -0.5], [0.0, 0.0, 1.0, 0.1], [0.0, 0.0, 0.0, 1.0]]
+)  # 90 deg of yaw and an offset
 
 
 def make_take(
@@ -81,6 +93,9 @@ def make_take(
         focus_distance_m=rng.uniform(0.5, 20, size=n),
         f_stop=rng.choice([1.4, 2.0, 2.8, 4.0, 5.6], size=n),
         fps=fps,
+        horizontal_aperture_mm=np.full(n, 36.0),
+        vertical_aperture_mm=np.full(n, 24.0),
+        base2world=PLACEMENT,
     )
 
 
@@ -152,6 +167,7 @@ def test_topics_schemas_and_times(take: TakeData, back: mcap_io.ReadTake) -> Non
         "/robot_description": ("std_msgs/msg/String", 1),
         "/tf": ("tf2_msgs/msg/TFMessage", len(tf_times(take))),
         "/tf_static": ("tf2_msgs/msg/TFMessage", 1),
+        "/camera/camera_info": ("sensor_msgs/msg/CameraInfo", len(take.frame_times)),
     }
     assert set(back.topics) == set(expected)
     for topic, (schema, count) in expected.items():
@@ -165,6 +181,7 @@ def test_topics_schemas_and_times(take: TakeData, back: mcap_io.ReadTake) -> Non
     lt = {topic: info.log_time_ns for topic, info in back.topics.items()}
     assert np.array_equal(lt["/joint_states"], seconds_to_ns(take.t))
     assert np.array_equal(lt["/shot/frames"], seconds_to_ns(take.frame_times))
+    assert np.array_equal(lt["/camera/camera_info"], seconds_to_ns(take.frame_times))
     assert np.array_equal(lt["/tf"], seconds_to_ns(tf_times(take)))
     for topic in ("/joint_trajectory", "/robot_description", "/tf_static"):
         assert lt[topic].tolist() == [0]
@@ -190,7 +207,7 @@ def test_file_layout_chunks_and_order(written: Path) -> None:
 
 
 def test_tf_static_tree(back: mcap_io.ReadTake) -> None:
-    statics = static_transforms(ROBOT)
+    statics = [Transform("world", "base_link", PLACEMENT), *static_transforms(ROBOT)]
     assert set(back.tf_static) == {s.child for s in statics}
     for s in statics:
         parent, T = back.tf_static[s.child]
@@ -395,6 +412,19 @@ def test_encoders_match_mcap_ros2(take: TakeData) -> None:
             for i, (parent, child) in enumerate(frames)
         ]})
         assert tf[k] == ref
+    infos = mcap_io._encode_camera_info(take)
+    for i in (0, 5):
+        K = ros2.camera_matrices(take.focal_length_mm[i : i + 1], [36.0], [24.0])[0]
+        ref = _mcap_ros2_encode("sensor_msgs/msg/CameraInfo", {
+            "header": {"stamp": _time(int(seconds_to_ns(take.frame_times[i]))),
+                       "frame_id": "camera_optical"},
+            "height": 1280, "width": 1920, "distortion_model": "plumb_bob", "d": [0.0] * 5,
+            "k": K.ravel().tolist(), "r": np.eye(3).ravel().tolist(),
+            "p": np.hstack([K, np.zeros((3, 1))]).ravel().tolist(),
+            "binning_x": 0, "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+        })  # fmt: skip
+        assert infos[i] == ref
     assert mcap_io._encode_string("<robot/>") == _mcap_ros2_encode(
         "std_msgs/msg/String", {"data": "<robot/>"}
     )
@@ -582,6 +612,7 @@ def test_describe(written: Path, take: TakeData) -> None:
         ("/robot_description", "std_msgs/msg/String", 1),
         ("/tf", "tf2_msgs/msg/TFMessage", len(tf_times(take))),
         ("/tf_static", "tf2_msgs/msg/TFMessage", 1),
+        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", len(take.frame_times)),
     }
     assert info["limits"]["joints"] == list(JOINT_NAMES)
     assert info["limits"]["max_velocity"] == ROBOT.max_velocity.tolist()

@@ -15,6 +15,7 @@ from camtraj.urdf import (
     BASE_FRAME,
     CAMERA_FRAME,
     LINK_FRAMES,
+    OPTICAL_FRAME,
     Transform,
     axis_frame,
     link_transforms,
@@ -195,7 +196,7 @@ def test_urdf_joints_names_limits_and_tree() -> None:
     assert root.get("name") == robot.name
     links = [link.get("name", "") for link in root.findall("link")]
     assert len(links) == len(set(links))
-    assert set(links) == {BASE_FRAME, CAMERA_FRAME, *LINK_FRAMES,
+    assert set(links) == {BASE_FRAME, CAMERA_FRAME, OPTICAL_FRAME, *LINK_FRAMES,
                           *(axis_frame(n) for n in JOINT_NAMES)}
     joints = root.findall("joint")
     names = [j.get("name") for j in joints]
