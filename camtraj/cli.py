@@ -16,7 +16,7 @@ import click
 
 import camtraj
 from camtraj.batch import batch_command, write_json_atomic
-from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
+from camtraj.errors import CamtrajError, CollisionError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -111,6 +111,10 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
         result = _limit_report(shot, exc, options)
+    except CollisionError as exc:
+        result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
+                  "link": exc.link, "prim": exc.prim, "distance_m": exc.distance,
+                  "clearance_m": exc.clearance}
     except CamtrajError as exc:
         _fail(exc)
     if as_json:
@@ -250,6 +254,8 @@ def _report(r: dict[str, Any]) -> str:
                       else f"{math.degrees(u['miss']):.1f} deg")
             lines.append(f"  {u['frame']:>5}  {amount:>10}  {u['reason']}")
         return "\n".join(lines)
+    if r["status"] == "collision":
+        return f"{r['shot']}: COLLISION\n  {r['message']}"
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]

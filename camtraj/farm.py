@@ -118,6 +118,7 @@ _OPENJD_PARAMS = {
     "--frames": ("Frames", "Film frame range A:B."),
     "--start-from": ("StartFrom", "Joint values the robot starts from [m, deg]."),
     "--objective": ("Objective", "IK objective."),
+    "--clearance": ("Clearance", "Distance [m] kept from the set file's obstacles."),
 }
 """Job parameter name and description of each optional convert flag."""
 

@@ -35,6 +35,8 @@ class ConvertOptions:
         timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
         start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
         objective: IK objective override (``"smooth"`` or ``"paper"``).
+        clearance: Distance the robot must keep from the set file's obstacles [m]; default
+            the set file's ``[collision] clearance_m``.
     """
 
     camera: str | None = None
@@ -46,6 +48,7 @@ class ConvertOptions:
     timing: str = "shot"
     start_from: tuple[float, ...] | None = None
     objective: str | None = None
+    clearance: float | None = None
 
     def __post_init__(self) -> None:
         if self.timing not in TIMING_MODES:
@@ -59,6 +62,9 @@ class ConvertOptions:
             raise InputError(msg)
         if self.objective is not None and self.objective not in OBJECTIVES:
             msg = f"objective must be one of {', '.join(OBJECTIVES)}, got {self.objective!r}"
+            raise InputError(msg)
+        if self.clearance is not None and not 0.0 <= self.clearance <= 5.0:
+            msg = f"clearance must be between 0 and 5 m, got {self.clearance}"
             raise InputError(msg)
 
 
@@ -185,6 +191,13 @@ def more_convert_options(func: F) -> F:
             type=click.Choice(OBJECTIVES),
             help="IK objective (default: the robot file's).",
         ),
+        click.option(
+            "--clearance",
+            type=float,
+            metavar="M",
+            help="Distance [m] the robot must keep from the set file's [collision] prims "
+            "(default: the set file's clearance_m).",
+        ),
     ]
     for decorator in reversed(decorators):
         func = decorator(func)
@@ -202,6 +215,7 @@ def build_options(
     set_file: str | None = None,
     start_from: str | None = None,
     objective: str | None = None,
+    clearance: float | None = None,
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
 
@@ -219,6 +233,7 @@ def build_options(
         timing=timing,
         start_from=_parse_start_from(start_from) if start_from is not None else None,
         objective=objective,
+        clearance=clearance,
     )
 
 
@@ -245,6 +260,8 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--start-from", _format_start_from(options.start_from)))
     if options.objective is not None:
         pairs.append(("--objective", options.objective))
+    if options.clearance is not None:
+        pairs.append(("--clearance", repr(float(options.clearance))))
     return pairs
 
 
