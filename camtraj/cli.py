@@ -18,6 +18,7 @@ import camtraj
 from camtraj.batch import batch_command, write_json_atomic
 from camtraj.errors import CamtrajError, CollisionError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
+from camtraj.place import place_command
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
@@ -166,6 +167,7 @@ def info(mcap_file: str, as_json: bool) -> None:
 
 
 main.add_command(batch_command, "batch")
+main.add_command(place_command, "place")
 try:  # the farm commands need nothing optional until they run
     from camtraj.farm import farm_group
 

@@ -405,7 +405,8 @@ def collision_error(contact: Contact, frame: int, clearance: float) -> Collision
                           distance=contact.distance, clearance=clearance)
 
 
-def take_samples(robot: Robot, q: Array, frame_samples: Array, step: float = 0.02) -> Array:
+def take_samples(robot: Robot, q: Array, frame_samples: NDArray[Any],
+                 step: float = 0.02) -> NDArray[np.int64]:
     """Indices of the servo samples to check: every film frame, and between samples wherever
     some point of the robot (a link origin) has moved ``step`` [m] since the last one checked.
     """
