@@ -488,7 +488,8 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
         for keep, frac in REFINE:  # pattern search: +-x, +-y, +-yaw around the best few
             best = _distinct(sorted(coarse, key=lambda r: r.key(), reverse=True), keep)
             h, hy = dxy * frac, dyaw * frac
-            steps = [(h, 0, 0), (-h, 0, 0), (0, h, 0), (0, -h, 0)]
+            steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0),
+                                                       (0, -h, 0)]
             steps += [(0, 0, hy), (0, 0, -hy)] if hy else []
             arr = np.array([(r.x + a, r.y + b, r.yaw_deg + c) for r in best for a, b, c in steps])
             good = (reach_slack(env, sub, arr[:, 0], arr[:, 1], arr[:, 2], problem.base_z) >= 0)
