@@ -27,7 +27,7 @@ import coal
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.errors import CollisionError, InputError, ShotFileError
+from camtraj.errors import CollisionError, InputError, ShotFileError, frame_ranges
 from camtraj.robot import Robot
 from camtraj.urdf import frame_poses, robot_solids
 
@@ -390,17 +390,21 @@ def check_samples(
     """
     dist, worst = model.closest(q, time_codes, base2world, clearance)
     if worst is not None:
-        raise collision_error(worst, int(frames[worst.sample]), clearance)
+        hit = sorted({int(f) for f in np.asarray(frames)[dist < clearance]})
+        raise collision_error(worst, int(frames[worst.sample]), clearance, hit)
     return float(dist.min()) if dist.size else math.inf
 
 
-def collision_error(contact: Contact, frame: int, clearance: float) -> CollisionError:
+def collision_error(contact: Contact, frame: int, clearance: float,
+                    frames: list[int] | None = None) -> CollisionError:
+    """The error for a contact at film frame ``frame`` (``frames``: every frame that hits)."""
     if contact.distance < 0:
         what = f"goes {100 * -contact.distance:.1f} cm into {contact.prim}"
     else:
         what = f"passes {100 * contact.distance:.1f} cm from {contact.prim}"
+    also = f" ({frame_ranges(frames)} too close)" if frames and frames != [frame] else ""
     msg = (f"frame {frame}: the robot's {contact.link} {what} (clearance "
-           f"{100 * clearance:.1f} cm); move the robot or the set piece")
+           f"{100 * clearance:.1f} cm){also}; move the robot or the set piece")
     return CollisionError(msg, frame=frame, link=contact.link, prim=contact.prim,
                           distance=contact.distance, clearance=clearance)
 

@@ -42,8 +42,8 @@ from camtraj.urdf import robot_solids
 Array = NDArray[np.float64]
 
 COARSE_FRAMES = 12  # frames solved per candidate in the coarse stages
-COARSE_KEEP = 24  # survivors of the cheap tests solved on the subsample
-REFINE = ((3, 0.5), (3, 0.25), (2, 0.125))  # (best placements refined, fraction of the step)
+COARSE_KEEP = 24  # at most this many survivors of the cheap tests solved on the subsample
+REFINE = ((2, 0.5), (2, 0.25), (1, 0.125))  # (best placements refined, fraction of the step)
 FULL_KEEP = 3  # placements solved on every frame (at least; --top more)
 YAW_STEP_DEG = 15.0
 _SPEED_CAP = 100.0
@@ -444,7 +444,7 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
     env = reach_envelope(robot)
     pts = problem.cam2world[:, :3, 3]
     n = pts.shape[0]
-    stride = max(1, n // COARSE_FRAMES)
+    stride = max(1, math.ceil(n / COARSE_FRAMES))
     sub = pts[::stride]
     _global_checks(env, pts, problem.base_z)
 
@@ -481,7 +481,8 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
         raise PlacementError(msg)
     cand = grid[ok]
     order = np.argsort(-slack[ok], kind="stable")
-    picked = _spread(order, cand, COARSE_KEEP, dxy, dyaw)
+    keep = min(COARSE_KEEP, max(8, len(cand) // 4))  # a small region needs fewer
+    picked = _spread(order, cand, keep, dxy, dyaw)
     runner = _Runner(problem, jobs, progress)
     try:
         coarse = runner.run([(*map(float, cand[i]), stride) for i in picked])
