@@ -234,3 +234,25 @@ def test_place_with_the_wall_as_obstacle_keeps_the_clearance(
     base2world[:3, 3] = meta["translation_m"]
     q = take.q[::2]  # every other servo sample of the whole take (run-up and run-out too)
     assert wall_distances(robot, q, base2world, wall["shot"]) >= clearance - 1e-3
+
+
+@pytest.mark.parametrize(
+    ("shift", "stretch", "words"),
+    [
+        ((0.0, 0.0, 0.0), 60.0, ["camera path is", "long", "track"]),
+        ((0.0, 0.0, 15.0), 0.0, ["height above the floor", "lift's reach"]),
+    ],
+)
+def test_a_shot_no_placement_can_do_is_exit_3_with_the_reason(
+        tmp_path: Path, robot: Robot, shift: tuple[float, float, float], stretch: float,
+        words: list[str]) -> None:
+    move = base_move(robot)
+    move[:, :3, 3] += shift
+    move[:, 0, 3] += np.linspace(0.0, stretch, move.shape[0])  # a 60 m long dolly move
+    shot = write_shot(tmp_path / "no.usda", move)
+    proc = run("place", shot, "-o", tmp_path / "p.toml")
+    assert proc.returncode == 3, proc.stderr
+    assert proc.stderr.startswith("ERROR: ") and proc.stderr.count("\n") == 1
+    for w in words:
+        assert w in proc.stderr
+    assert not (tmp_path / "p.toml").exists()
