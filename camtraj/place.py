@@ -533,14 +533,17 @@ def _global_checks(env: Envelope, pts: Array, base_z: float) -> None:
                f"{zhi - zlo + 2 * env.offset:.2f} m")
         raise PlacementError(msg)
     xy = pts[:, :2] - pts[:, :2].mean(axis=0)
-    ang = np.radians(np.arange(0.0, 180.0, 1.0))
+    ang = np.radians(np.arange(0.0, 360.0, 1.0))  # 180..360: the perpendicular of 0..180
     proj = xy @ np.stack([np.cos(ang), np.sin(ang)])
-    extent = float((proj.max(axis=0) - proj.min(axis=0)).min())
-    cover = env.axis_hi - env.axis_lo + 2 * (env.reach + env.offset)
-    if extent > cover:
-        msg = (f"the camera path is {extent:.2f} m long in every direction on the floor; the "
-               f"track ({env.axis_hi - env.axis_lo:.2f} m) and the arm's reach cover at most "
-               f"{cover:.2f} m")
+    extent = proj.max(axis=0) - proj.min(axis=0)
+    along, across = extent[:180], extent[90:270]
+    length = env.axis_hi - env.axis_lo + 2 * (env.reach + env.offset)
+    width = 2 * (env.reach + env.offset)
+    if not np.any((along <= length) & (across <= width)):
+        i = int(np.argmax(along))
+        msg = (f"the camera path is {along[i]:.2f} m long and {across[i]:.2f} m wide on the "
+               f"floor; the track ({env.axis_hi - env.axis_lo:.2f} m) and the arm's reach cover "
+               f"at most {length:.2f} m by {width:.2f} m")
         raise PlacementError(msg)
 
 
