@@ -35,6 +35,7 @@ Array = NDArray[np.float64]
 
 GPRIMS = ("Cube", "Sphere", "Cylinder", "Capsule", "Cone")
 SUBFRAMES = 4  # obstacle poses sampled per frame
+NEAR = 0.1  # [m] distances are measured exactly this far beyond the clearance
 _YUP2ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
@@ -343,10 +344,13 @@ class CollisionModel:
                 clearance: float) -> tuple[Array, Contact | None]:
         """Signed distance of the closest robot-obstacle pair at each sample.
 
+        Exact distances are computed only for pairs closer than ``clearance + NEAR`` (coal's
+        collision test with that security margin decides, after a bounding-sphere test).
+
         Returns:
-            (n,) distances [m] (inf where every pair is farther than ``clearance`` by the
-            bounding-sphere test, which is exact about that), and the sample with the smallest
-            distance below ``clearance`` as a :class:`Contact` (None if none is).
+            (n,) distances [m] (inf where every pair is farther than ``clearance + NEAR``),
+            and the sample with the smallest distance below ``clearance`` as a
+            :class:`Contact` (None if none is).
         """
         n = q.shape[0]
         best = np.full(n, np.inf)
@@ -356,15 +360,21 @@ class CollisionModel:
         centres = solids[:, :, :3, 3]  # (n, k, 3)
         worst: Contact | None = None
         req = coal.DistanceRequest()
+        near = coal.CollisionRequest()
+        near.security_margin = clearance + NEAR
         for o, ob in enumerate(self.obstacles):
             poses = ob.pose_at(time_codes)
             oc = poses[:, :3, :3] @ ob.centre + poses[:, :3, 3]  # (n, 3)
             gap = (np.linalg.norm(centres - oc[:, None, :], axis=2) - self.robot_radius[None]
                    - ob.radius)
-            for i, j in zip(*np.nonzero(gap < clearance), strict=True):
-                res = coal.DistanceResult()
-                d = float(coal.distance(self.robot_geom[j], _transform(solids[i, j]),
-                                        self.obstacle_geom[o], _transform(poses[i]), req, res))
+            geom = self.obstacle_geom[o]
+            for i, j in zip(*np.nonzero(gap < clearance + NEAR), strict=True):
+                T1, T2 = _transform(solids[i, j]), _transform(poses[i])
+                if not coal.collide(self.robot_geom[j], T1, geom, T2, near,
+                                    coal.CollisionResult()):
+                    continue
+                d = float(coal.distance(self.robot_geom[j], T1, geom, T2, req,
+                                        coal.DistanceResult()))
                 if d < best[i]:
                     best[i] = d
                 if d < clearance and (worst is None or d < worst.distance):
