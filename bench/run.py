@@ -17,6 +17,8 @@ comes with a ratio against a baseline measured in the same run:
 5. Maximum feasible speed (the timing stage's ``max_speed``) per benchmark shot: ``shot`` vs
    ``paper`` vs the retired ``smooth`` objective, solved by the tree at git revision
    ``--smooth-rev`` (exported to a temporary folder and run in a subprocess).
+6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
+   (``bench/bench_place.py``).
 
 numpy, not numba: a numba version of the closed form measured 5x numpy on the old per-frame call
 mix but only 2.4x at >= 256 candidates per call, and costs ~11 s of JIT compilation per process;
@@ -706,6 +708,48 @@ def print_speeds(res: dict[str, Any]) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
+# Table 6: placement search and collision checks
+# ---------------------------------------------------------------------------------------------
+
+
+def bench_place(quick: bool) -> dict[str, Any]:
+    """``bench/bench_place.py``: camtraj place on a 10-second shot, collision cost per frame."""
+    spec = importlib.util.spec_from_file_location("bench_place", HERE / "bench_place.py")
+    if spec is None or spec.loader is None:
+        return {"skipped": "cannot load bench/bench_place.py"}
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+        frames = 120 if quick else 240
+        return {"frames": frames,
+                "result": module.run(lambda s: log(f"table 6: {s}"), frames=frames)}
+    except Exception as exc:
+        return {"skipped": f"bench_place failed: {type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc(limit=3)}
+
+
+def print_place(res: dict[str, Any]) -> None:
+    if "skipped" in res:
+        print(f"\n6. Placement: skipped: {res['skipped']}")
+        return
+    r = res["result"]
+    rows = [
+        ["camtraj place wall time [s] (target <= 30)", fmt(r["place_wall_s"])],
+        ["placements solved / screened", f"{r['place_candidates']:.0f} / "
+                                         f"{r['place_screened']:.0f}"],
+        ["placements solved per second", fmt(r["place_candidates_per_s"])],
+        ["place time / one full solve of the shot [x]", fmt(r["place_in_full_solves"])],
+        ["collision check per film frame, 10,000 triangles [ms]",
+         fmt(r["collision_ms_per_frame"])],
+        ["  servo samples checked per frame", fmt(r["collision_samples_per_frame"])],
+        ["  its cost / the IK's per frame [x]", fmt(r["collision_vs_ik"])],
+    ]
+    table(f"6. Placement search ({res['frames']} frames, --jobs 2, default region) and "
+          "collision checks (bench/bench_place.py)", ["figure", "value"], rows,
+          ["placements solved: subsampled and full solves; screened: the cheap tests"])
+
+
+# ---------------------------------------------------------------------------------------------
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -764,6 +808,10 @@ def main(argv: list[str] | None = None) -> int:
     batch = bench_batch(quick, est_shot)
     results["batch"] = batch
     print_batch(batch)
+
+    place_res = bench_place(quick)
+    results["place"] = place_res
+    print_place(place_res)
 
     total = time.perf_counter() - t_start
     results["bench_wall_s"] = total

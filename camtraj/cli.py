@@ -20,8 +20,9 @@ import click
 import camtraj
 from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
-from camtraj.errors import CamtrajError, UnreachableFramesError
+from camtraj.errors import CamtrajError, CollisionError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
+from camtraj.place import place_command
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -241,6 +242,10 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
         result = _limit_report(shot, exc, options)
+    except CollisionError as exc:
+        result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
+                  "link": exc.link, "prim": exc.prim, "distance_m": exc.distance,
+                  "clearance_m": exc.clearance}
     except CamtrajError as exc:
         progress.close()
         _fail(exc)
@@ -287,6 +292,7 @@ def info(mcap_file: str, as_json: bool) -> None:
 
 
 main.add_command(batch_command, "batch")
+main.add_command(place_command, "place")
 try:  # the farm commands need nothing optional until they run
     from camtraj.farm import farm_group
 
@@ -397,6 +403,8 @@ def _report(r: dict[str, Any]) -> str:
                       else f"{math.degrees(u['miss']):.1f} deg")
             lines.append(f"  {u['frame']:>5}  {amount:>10}  {u['reason']}")
         return "\n".join(lines)
+    if r["status"] == "collision":
+        return f"{r['shot']}: COLLISION\n  {r['message']}"
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]

@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import math
 import time
-import tomllib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -30,6 +29,7 @@ from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
+from camtraj.set_file import SetFile
 from camtraj.timing import Limits, Take, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
@@ -56,48 +56,6 @@ class Placement:
         T[:3, 3] = (x, y, z)
         return cls(T, source)
 
-    @classmethod
-    def from_set_file(cls, path: str | Path) -> Placement:
-        """A ``[placement]`` table: x, y, z [m], yaw_deg, or a full ``rotation`` 3x3 matrix."""
-        path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            msg = f"set file {path}: cannot read it ({exc.strerror or exc})"
-            raise InputError(msg) from exc
-        except tomllib.TOMLDecodeError as exc:
-            msg = f"set file {path}: not valid TOML ({exc})"
-            raise InputError(msg) from exc
-        table = data.get("placement")
-        if not isinstance(table, dict):
-            msg = f"set file {path}: needs a [placement] table"
-            raise InputError(msg)
-        allowed = {"x", "y", "z", "yaw_deg", "rotation"}
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            msg = (f"set file {path}: unknown key(s) {', '.join(unknown)} in [placement]; "
-                   f"allowed: {', '.join(sorted(allowed))}")
-            raise InputError(msg)
-        vals = {}
-        for key in ("x", "y", "z", "yaw_deg"):
-            v = table.get(key, 0.0)
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                msg = f"set file {path}: [placement] {key} = {v!r} must be a finite number"
-                raise InputError(msg)
-            vals[key] = float(v)
-        place = cls.from_xyz_yaw(vals["x"], vals["y"], vals["z"], vals["yaw_deg"], str(path))
-        if "rotation" in table:
-            if "yaw_deg" in table:
-                msg = f"set file {path}: give either yaw_deg or rotation in [placement], not both"
-                raise InputError(msg)
-            R = np.asarray(table["rotation"], dtype=float)
-            if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or \
-                    np.linalg.det(R) < 0:
-                msg = f"set file {path}: [placement] rotation must be a 3x3 proper rotation"
-                raise InputError(msg)
-            place.base2world[:3, :3] = R
-        return place
-
     def describe(self) -> dict[str, Any]:
         R = self.base2world[:3, :3]
         return {
@@ -119,6 +77,7 @@ class Analysis:
     path: PathSolution | None = None
     take: Take | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    collision: dict[str, Any] | None = None  # what the collision check found, if it ran
 
 
 MAX_DISTANCE_M = 1.0e6
@@ -152,7 +111,9 @@ def load_placement(options: ConvertOptions) -> Placement:
         x, y, z, yaw = options.placement
         return Placement.from_xyz_yaw(x, y, z, yaw)
     if options.set_file is not None:
-        return Placement.from_set_file(options.set_file)
+        base2world = SetFile.read(options.set_file).base2world
+        if base2world is not None:
+            return Placement(base2world, str(options.set_file))
     return Placement()
 
 
@@ -212,6 +173,16 @@ def analyse(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
             rate=options.rate, frame_numbers=shot.frames, start=start,
         )
+    set_file = SetFile.read(options.set_file) if options.set_file is not None else None
+    if set_file is not None and set_file.prims:
+        from camtraj.collision import check_take
+
+        clearance = set_file.clearance_m if options.clearance is None else options.clearance
+        with _stage(timings, "collision"):
+            closest = check_take(shot_path, robot, placement.base2world, analysis.take,
+                                 shot.time_codes, set_file.prims, clearance)
+        analysis.collision = {"prims": list(set_file.prims), "clearance_m": clearance,
+                              "closest_m": closest if math.isfinite(closest) else None}
     return analysis
 
 
@@ -374,6 +345,7 @@ def summary(
         "margins": _margins(path, shot.frames),
         "runout": extents(rep.runout),
         "warnings": warnings,
+        "collision": analysis.collision,
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }

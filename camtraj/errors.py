@@ -87,6 +87,27 @@ class LimitError(InfeasibleError):
     """The timed move exceeds a velocity, acceleration or jerk limit."""
 
 
+class CollisionError(InfeasibleError):
+    """The robot comes closer to an obstacle of the set than the clearance allows.
+
+    Attributes:
+        frame: Film frame number at (or after) the contact.
+        link: The robot part (e.g. ``"forearm (link5)"``).
+        prim: Prim path of the obstacle.
+        distance: Signed distance [m] (negative: penetration depth).
+        clearance: The required distance [m].
+    """
+
+    def __init__(self, message: str, *, frame: int, link: str, prim: str, distance: float,
+                 clearance: float) -> None:
+        super().__init__(message)
+        self.frame = frame
+        self.link = link
+        self.prim = prim
+        self.distance = distance
+        self.clearance = clearance
+
+
 def _frame_ranges(frames: list[int]) -> str:
     """Compress [3, 4, 5, 9] into 'frames 3-5, 9'."""
     if not frames:

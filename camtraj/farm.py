@@ -126,6 +126,7 @@ _OPENJD_PARAMS = {
     "--start-from": ("StartFrom", "Joint values the robot starts from [m, deg]."),
     "--objective": ("Objective", "IK objective."),
     "--focal-length-unit": ("FocalLengthUnit", "How the shot's focalLength is read."),
+    "--clearance": ("Clearance", "Distance [m] kept from the set file's obstacles."),
 }
 """Job parameter name and description of each optional convert flag."""
 

@@ -40,6 +40,8 @@ class ConvertOptions:
         objective: IK objective override (``"shot"`` or ``"paper"``).
         focal_length_unit: ``"schema"`` (USD's tenths of a scene unit) or ``"mm"`` (what some
             older exporters write).
+        clearance: Distance the robot must keep from the set file's obstacles [m]; default
+            the set file's ``[collision] clearance_m``.
     """
 
     camera: str | None = None
@@ -52,6 +54,7 @@ class ConvertOptions:
     start_from: tuple[float, ...] | None = None
     objective: str | None = None
     focal_length_unit: str = "schema"
+    clearance: float | None = None
 
     def __post_init__(self) -> None:
         if self.timing not in TIMING_MODES:
@@ -72,6 +75,10 @@ class ConvertOptions:
                 f"got {self.focal_length_unit!r}"
             )
             raise InputError(msg)
+        if self.clearance is not None and not 0.0 <= self.clearance <= 5.0:
+            msg = f"clearance must be between 0 and 5 m, got {self.clearance}"
+            raise InputError(msg)
+
 
 
 # --------------------------------------------------------------------------------------------
@@ -205,6 +212,13 @@ def more_convert_options(func: F) -> F:
             help="How the shot's focalLength is read: schema = tenths of a scene unit (USD); "
             "mm = millimetres, as some older exporters write it.",
         ),
+        click.option(
+            "--clearance",
+            type=float,
+            metavar="M",
+            help="Distance [m] the robot must keep from the set file's [collision] prims "
+            "(default: the set file's clearance_m).",
+        ),
     ]
     for decorator in reversed(decorators):
         func = decorator(func)
@@ -247,6 +261,7 @@ def build_options(
     start_from: str | None = None,
     objective: str | None = None,
     focal_length_unit: str = "schema",
+    clearance: float | None = None,
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
 
@@ -265,6 +280,7 @@ def build_options(
         start_from=_parse_start_from(start_from) if start_from is not None else None,
         objective=objective,
         focal_length_unit=focal_length_unit,
+        clearance=clearance,
     )
 
 
@@ -293,6 +309,8 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--objective", options.objective))
     if options.focal_length_unit != "schema":
         pairs.append(("--focal-length-unit", options.focal_length_unit))
+    if options.clearance is not None:
+        pairs.append(("--clearance", repr(float(options.clearance))))
     return pairs
 
 

@@ -235,27 +235,6 @@ MATERIALS: dict[str, tuple[float, float, float, float]] = {
 }
 """Material name -> RGBA colour (0-1) of the visuals."""
 
-Vec3 = tuple[float, float, float]
-
-
-class Visual(NamedTuple):
-    """One primitive solid fixed in a frame: the robot's look, shared by URDF and USD.
-
-    Attributes:
-        frame: The frame (URDF link) it is fixed in.
-        shape: ``"box"`` or ``"cylinder"`` (a cylinder runs along the frame's z axis).
-        size: Box edge lengths (x, y, z) [m]; cylinder (radius, radius, length) [m].
-        material: A key of :data:`MATERIALS`.
-        xyz: Centre of the solid in the frame [m].
-    """
-
-    frame: str
-    shape: str
-    size: Vec3
-    material: str
-    xyz: Vec3 = (0.0, 0.0, 0.0)
-
-
 def _num(x: float) -> str:
     """Shortest round-trip text of a float, with rounding noise below 1e-15 snapped to 0."""
     v = float(x)
@@ -274,66 +253,118 @@ def _origin(parent: ET.Element, T: Array) -> None:
     ET.SubElement(parent, "origin", xyz=_vec(T[:3, 3]), rpy=_vec([roll, pitch, yaw]))
 
 
-def visuals(robot: Robot) -> list[Visual]:
-    """The primitive solids that draw the robot, frame by frame (see the module docstring)."""
+class Solid(NamedTuple):
+    """One primitive shape of the robot model, fixed in one frame of the tree.
+
+    Attributes:
+        name: What it is (``"forearm"``, ``"rail"``, ...), for reports.
+        frame: The frame it hangs in (``base_link``, ``link3``, ``pan_axis``, ``camera``, ...).
+        shape: ``"box"`` or ``"cylinder"`` (a cylinder along the frame's local z).
+        size: Box edge lengths (x, y, z), or (radius, length) of a cylinder [m].
+        xyz: Centre of the shape in the frame [m].
+        material: URDF material name.
+    """
+
+    name: str
+    frame: str
+    shape: str
+    size: tuple[float, ...]
+    xyz: tuple[float, float, float]
+    material: str
+
+
+def robot_solids(robot: Robot) -> list[Solid]:
+    """The robot as primitive shapes: the URDF visuals and the collision model are these.
+
+    See the module docstring for where the frames sit.
+    """
     dh = robot.dh
     names = robot.joint_names
     ax = {n: axis_frame(n) for n in names}
     track = names.index("track")
     extend = names.index("extend")
-    out: list[Visual] = []
-
-    def box(frame: str, size: Vec3, material: str, xyz: Vec3 = (0.0, 0.0, 0.0)) -> None:
-        out.append(Visual(frame, "box", size, material, xyz))
-
-    def cylinder(frame: str, radius: float, length: float, material: str,
-                 xyz: Vec3 = (0.0, 0.0, 0.0)) -> None:
-        out.append(Visual(frame, "cylinder", (radius, radius, length), material, xyz))
-
     # Rail along the track (base x), under the carriage's travel plus some overhang.
     x0 = dh.r10 + float(robot.lower[track]) - 0.6
     x1 = dh.r10 + float(robot.upper[track]) + 0.6
-    box(BASE_FRAME, (x1 - x0, 0.5, 0.08), "camtraj_rail", ((x0 + x1) / 2, 0.0, -0.14))
-    # Carriage: link1 moves with the track but not with rotate (z up).
-    box("link1", (0.7, 0.8, 0.1), "camtraj_joint", (0.0, 0.0, -0.05))
-    # Turret ring: turns with rotate, from the carriage up to the shoulder (height r2).
-    cylinder(ax["rotate"], 0.33, dh.r2, "camtraj_body", (0.0, 0.0, dh.r2 / 2))
-    # Shoulder hub on the lift axis (z of lift_axis), and the riser to the arm line (l3).
-    cylinder(ax["lift"], 0.16, 0.42, "camtraj_joint")
-    if dh.l3 > 0:
-        box(ax["lift"], (0.22, dh.l3, 0.22), "camtraj_body", (0.0, -dh.l3 / 2, 0.0))
-    # Arm: outer tube along link3's z (the extension direction) with a counterweight behind.
-    cylinder("link3", 0.12, dh.r40, "camtraj_body", (0.0, 0.0, dh.r40 / 2))
-    box("link3", (0.34, 0.34, 0.45), "camtraj_joint", (0.0, 0.0, -0.3))
-    # Extension: inner tube, ending at the elbow (z = r40 in extend_axis).
     inner = max(float(robot.upper[extend]), 0.2)
-    cylinder(ax["extend"], 0.085, inner, "camtraj_rail", (0.0, 0.0, dh.r40 - inner / 2))
-    # Elbow hub on the elbow axis.
-    cylinder(ax["elbow"], 0.11, 0.28, "camtraj_joint")
-    # Forearm: link5's z runs from the elbow to the wrist centre (r6).
-    cylinder("link5", 0.075, dh.r6, "camtraj_body", (0.0, 0.0, dh.r6 / 2))
-    # Pan housing just above the wrist centre, turning with pan about the forearm.
-    box(ax["pan"], (0.17, 0.17, 0.14), "camtraj_joint", (0.0, 0.0, max(dh.r6 - 0.17, 0.0)))
-    # Tilt hub on the tilt axis at the wrist centre.
-    cylinder(ax["tilt"], 0.065, 0.24, "camtraj_body")
-    # Roll flange: a disc on the flange (link8) z.
-    cylinder("link8", 0.075, 0.03, "camtraj_joint", (0.0, 0.0, 0.015))
-    # Camera: body around the nodal point, lens along the view direction (camera -z).
-    box(CAMERA_FRAME, (0.12, 0.14, 0.22), "camtraj_camera", (0.0, 0.0, 0.02))
-    cylinder(CAMERA_FRAME, 0.045, 0.12, "camtraj_lens", (0.0, 0.0, -0.15))
+    solids = [
+        Solid("rail", BASE_FRAME, "box", (x1 - x0, 0.5, 0.08), ((x0 + x1) / 2, 0.0, -0.14),
+              "camtraj_rail"),
+        # Carriage: link1 moves with the track but not with rotate (z up).
+        Solid("carriage", "link1", "box", (0.7, 0.8, 0.1), (0.0, 0.0, -0.05), "camtraj_joint"),
+        # Turret ring: turns with rotate, from the carriage up to the shoulder (height r2).
+        Solid("turret", ax["rotate"], "cylinder", (0.33, dh.r2), (0.0, 0.0, dh.r2 / 2),
+              "camtraj_body"),
+        # Shoulder hub on the lift axis (z of lift_axis), and the riser to the arm line (l3).
+        Solid("shoulder", ax["lift"], "cylinder", (0.16, 0.42), (0.0, 0.0, 0.0),
+              "camtraj_joint"),
+    ]
+    if dh.l3 > 0:
+        solids.append(Solid("riser", ax["lift"], "box", (0.22, dh.l3, 0.22),
+                            (0.0, -dh.l3 / 2, 0.0), "camtraj_body"))
+    solids += [
+        # Arm: outer tube along link3's z (the extension direction) with a counterweight.
+        Solid("arm", "link3", "cylinder", (0.12, dh.r40), (0.0, 0.0, dh.r40 / 2),
+              "camtraj_body"),
+        Solid("counterweight", "link3", "box", (0.34, 0.34, 0.45), (0.0, 0.0, -0.3),
+              "camtraj_joint"),
+        # Extension: inner tube, ending at the elbow (z = r40 in extend_axis).
+        Solid("extension", ax["extend"], "cylinder", (0.085, inner),
+              (0.0, 0.0, dh.r40 - inner / 2), "camtraj_rail"),
+        # Elbow hub on the elbow axis.
+        Solid("elbow hub", ax["elbow"], "cylinder", (0.11, 0.28), (0.0, 0.0, 0.0),
+              "camtraj_joint"),
+        # Forearm: link5's z runs from the elbow to the wrist centre (r6).
+        Solid("forearm", "link5", "cylinder", (0.075, dh.r6), (0.0, 0.0, dh.r6 / 2),
+              "camtraj_body"),
+        # Pan housing just above the wrist centre, turning with pan about the forearm.
+        Solid("pan housing", ax["pan"], "box", (0.17, 0.17, 0.14),
+              (0.0, 0.0, max(dh.r6 - 0.17, 0.0)), "camtraj_joint"),
+        # Tilt hub on the tilt axis at the wrist centre.
+        Solid("tilt hub", ax["tilt"], "cylinder", (0.065, 0.24), (0.0, 0.0, 0.0),
+              "camtraj_body"),
+        # Roll flange: a disc on the flange (link8) z.
+        Solid("flange", "link8", "cylinder", (0.075, 0.03), (0.0, 0.0, 0.015),
+              "camtraj_joint"),
+        # Camera: body around the nodal point, lens along the view direction (camera -z).
+        Solid("camera body", CAMERA_FRAME, "box", (0.12, 0.14, 0.22), (0.0, 0.0, 0.02),
+              "camtraj_camera"),
+        Solid("lens", CAMERA_FRAME, "cylinder", (0.045, 0.12), (0.0, 0.0, -0.15),
+              "camtraj_lens"),
+    ]
+    return solids
+
+
+def frame_poses(robot: Robot, q: ArrayLike) -> dict[str, Array]:
+    """Every frame of the tree in the base frame (``frame2base``) at joint vectors q (..., 8).
+
+    Returns:
+        Frame name -> (..., 4, 4): ``base_link``, ``link0``..``link8``, each
+        ``<joint>_axis`` and ``camera``.
+    """
+    qa = np.asarray(q, dtype=float)
+    frames = robot.link_frames(qa)
+    out: dict[str, Array] = {BASE_FRAME: np.broadcast_to(np.eye(4), (*qa.shape[:-1], 4, 4))}
+    for i, name in enumerate(LINK_FRAMES):
+        out[name] = frames[..., i, :, :]
+    for tr in link_transforms(robot, qa):
+        out[tr.child] = out[tr.parent] @ tr.child2parent
+    out[CAMERA_FRAME] = out[LINK_FRAMES[-1]] @ robot.camera2flange
     return out
 
 
-def _add_visual(link: ET.Element, visual: Visual) -> None:
-    vis = ET.SubElement(link, "visual")
-    ET.SubElement(vis, "origin", xyz=_vec(visual.xyz), rpy=_vec((0.0, 0.0, 0.0)))
-    geom = ET.SubElement(vis, "geometry")
-    if visual.shape == "box":
-        ET.SubElement(geom, "box", {"size": _vec(visual.size)})
-    else:
-        ET.SubElement(geom, "cylinder",
-                      {"radius": _num(visual.size[0]), "length": _num(visual.size[2])})
-    ET.SubElement(vis, "material", name=visual.material)
+def _add_visuals(robot: Robot, links: dict[str, ET.Element]) -> None:
+    """The shapes of :func:`robot_solids` as URDF visuals."""
+    for solid in robot_solids(robot):
+        vis = ET.SubElement(links[solid.frame], "visual")
+        ET.SubElement(vis, "origin", xyz=_vec(solid.xyz), rpy=_vec((0.0, 0.0, 0.0)))
+        geom = ET.SubElement(vis, "geometry")
+        if solid.shape == "box":
+            ET.SubElement(geom, "box", {"size": _vec(solid.size)})
+        else:
+            ET.SubElement(geom, "cylinder",
+                          {"radius": _num(solid.size[0]), "length": _num(solid.size[1])})
+        ET.SubElement(vis, "material", name=solid.material)
 
 
 def robot_urdf(robot: Robot) -> str:
@@ -360,8 +391,7 @@ def robot_urdf(robot: Robot) -> str:
         add_link(LINK_FRAMES[i])
     add_link(CAMERA_FRAME)
     add_link(OPTICAL_FRAME)
-    for visual in visuals(robot):
-        _add_visual(links[visual.frame], visual)
+    _add_visuals(robot, links)
 
     def add_fixed(tr: Transform) -> None:
         joint = ET.SubElement(root, "joint", name=f"{tr.parent}_to_{tr.child}", type="fixed")

@@ -19,7 +19,7 @@ code is the forward kinematics of the solution at that frame, placed and convert
 stage's units and up axis. ``camtraj_camera`` carries the shot's lens (focal length, apertures,
 clipping range, f-stop, focus distance), animated where the shot's lens is.
 
-The solids are the URDF's visuals (:func:`camtraj.urdf.visuals`): UsdGeom.Cube (size 1,
+The solids are the URDF's visuals (:func:`camtraj.urdf.robot_solids`): UsdGeom.Cube (size 1,
 scaled) and UsdGeom.Cylinder (axis z) with a display colour. The camera body and lens sit on
 ``camtraj_camera`` itself and have purpose ``guide``, so looking through the camera (or
 rendering it) does not look out through the inside of the lens; usdview shows them with
@@ -45,10 +45,10 @@ from camtraj.urdf import (
     BASE_FRAME,
     CAMERA_FRAME,
     MATERIALS,
-    Visual,
+    Solid,
     joint_axes,
+    robot_solids,
     static_transforms,
-    visuals,
 )
 from camtraj.usd_shot import YUP2ZUP, Shot
 
@@ -94,7 +94,7 @@ def _frame_tree(robot: Robot) -> dict[str, list[tuple[str, Any]]]:
     return tree
 
 
-def _author_visual(stage: Any, path: Sdf.Path, visual: Visual, units_per_m: float,
+def _author_visual(stage: Any, path: Sdf.Path, visual: Solid, units_per_m: float,
                    purpose: str | None) -> None:
     k = units_per_m
     if visual.shape == "box":
@@ -104,7 +104,7 @@ def _author_visual(stage: Any, path: Sdf.Path, visual: Visual, units_per_m: floa
         gprim.AddTranslateOp().Set(Gf.Vec3d(*(k * v for v in visual.xyz)))
         gprim.AddScaleOp().Set(Gf.Vec3f(*(k * v for v in visual.size)))
     else:
-        radius, length = k * visual.size[0], k * visual.size[2]
+        radius, length = k * visual.size[0], k * visual.size[1]
         gprim = UsdGeom.Cylinder.Define(stage, path)
         gprim.CreateRadiusAttr(radius)
         gprim.CreateHeightAttr(length)
@@ -192,8 +192,8 @@ def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: Ar
     stage.SetDefaultPrim(root.GetPrim())
 
     tree = _frame_tree(robot)
-    by_frame: dict[str, list[Visual]] = {}
-    for visual in visuals(robot):
+    by_frame: dict[str, list[Solid]] = {}
+    for visual in robot_solids(robot):
         by_frame.setdefault(visual.frame, []).append(visual)
 
     def add(frame: str, path: Sdf.Path) -> None:

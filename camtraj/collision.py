@@ -1,0 +1,466 @@
+"""Collision checks of the robot against the set: the stage's meshes and gprims, with coal.
+
+The robot is its primitive shapes (:func:`camtraj.urdf.robot_solids`, the URDF visuals); the
+obstacles are the prims a set file names (``[collision] prims``, paths or glob patterns) and
+every Mesh, Cube, Sphere, Cylinder, Capsule and Cone under them, with their animated world
+transforms, in the converted world (metres, Z-up, as :mod:`camtraj.usd_shot` converts the
+camera). Distances are coal's signed distances (negative: penetration depth).
+
+* Gprims are exact coal shapes when their scale allows (uniform, or along the shape's own
+  axes), else the convex hull of their surface. Convex meshes become coal convex solids; other
+  meshes are surfaces (a part wholly inside a non-convex mesh, touching none of its faces, is
+  not seen). A prim's scale and points are read at the first frame; its motion at every
+  quarter frame (the pose nearest the asked time is used).
+* The take is checked at every film frame, and between frames wherever the robot moves more
+  than ``step`` metres since the last checked sample (servo samples of the take).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import coal
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.errors import CollisionError, InputError, ShotFileError, frame_ranges
+from camtraj.robot import Robot
+from camtraj.urdf import frame_poses, robot_solids
+
+Array = NDArray[np.float64]
+
+GPRIMS = ("Cube", "Sphere", "Cylinder", "Capsule", "Cone")
+SUBFRAMES = 4  # obstacle poses sampled per frame
+NEAR = 0.1  # [m] distances are measured exactly this far beyond the clearance
+_YUP2ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One obstacle, as plain arrays (picklable for worker processes).
+
+    Attributes:
+        path: Prim path.
+        shape: ``"box"``, ``"sphere"``, ``"cylinder"``, ``"capsule"``, ``"cone"`` (along the
+            obstacle frame's z, centred), ``"convex"`` or ``"mesh"``.
+        size: Box edges (x, y, z); sphere (radius,); cylinder / capsule / cone (radius,
+            height) [m]. Empty for convex and mesh.
+        vertices: (k, 3) [m] in the obstacle frame (convex and mesh), else (0, 3).
+        triangles: (t, 3) vertex indices (convex and mesh), else (0, 3).
+        time_codes: (m,) time codes of ``poses``; one for a still obstacle.
+        poses: (m, 4, 4) rigid obstacle frame -> world [m].
+        centre: Centre of a sphere around the shape, in the obstacle frame [m].
+        radius: Its radius [m] (for the cheap pre-test).
+    """
+
+    path: str
+    shape: str
+    size: tuple[float, ...]
+    vertices: Array
+    triangles: NDArray[np.int64]
+    time_codes: Array
+    poses: Array
+    centre: Array
+    radius: float
+
+    def pose_at(self, time_codes: Array) -> Array:
+        """(n, 4, 4) poses at the time codes (the nearest sampled pose)."""
+        if self.time_codes.size == 1:
+            return np.broadcast_to(self.poses[0], (len(time_codes), 4, 4))
+        idx = np.abs(np.asarray(time_codes)[:, None] - self.time_codes[None, :]).argmin(axis=1)
+        out: Array = self.poses[idx]
+        return out
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The closest approach of one check (below the clearance when it failed)."""
+
+    sample: int
+    distance: float
+    link: str
+    prim: str
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading the obstacles from the stage
+# ---------------------------------------------------------------------------------------------
+
+
+def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...],
+                   time_codes: Array) -> list[Obstacle]:
+    """The obstacles the patterns name on the stage, posed over ``time_codes`` (the frames).
+
+    Raises:
+        InputError: A pattern matches no prim, or a matched prim holds no geometry.
+    """
+    from pxr import Usd, UsdGeom
+
+    if not patterns:
+        return []
+    stage = Usd.Stage.Open(str(stage_path), Usd.Stage.LoadAll)
+    if not stage:
+        msg = f"{stage_path}: USD could not open the file"
+        raise ShotFileError(msg)
+    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    convert = np.eye(4)
+    convert[:3, :3] = (_YUP2ZUP if str(UsdGeom.GetStageUpAxis(stage)) == "Y" else np.eye(3)) * mpu
+    tcs = np.asarray(time_codes, dtype=float)
+    fine = np.unique(np.concatenate(
+        [tcs[0] + (tcs[-1] - tcs[0]) * np.linspace(0, 1, SUBFRAMES * (len(tcs) - 1) + 1), tcs]))
+    prims = list(stage.Traverse())
+    chosen: dict[str, Any] = {}
+    for pattern in patterns:
+        matched = [p for p in prims if fnmatch.fnmatchcase(str(p.GetPath()), pattern)]
+        if not matched:
+            msg = f"{stage_path}: collision prims {pattern!r} matches no prim on the stage"
+            raise InputError(msg)
+        for top in matched:
+            found = [p for p in Usd.PrimRange(top) if p.IsA(UsdGeom.Mesh) or
+                     str(p.GetTypeName()) in GPRIMS]
+            if not found:
+                msg = (f"{stage_path}: collision prim {top.GetPath()} holds no mesh or gprim "
+                       f"({', '.join(('Mesh', *GPRIMS))})")
+                raise InputError(msg)
+            chosen.update({str(p.GetPath()): p for p in found})
+    cache = UsdGeom.XformCache()
+    out = []
+    for path, prim in chosen.items():
+        moving = _might_move(prim, UsdGeom)
+        times = fine if moving else tcs[:1]
+        mats = np.empty((len(times), 4, 4))
+        for i, tc in enumerate(times):
+            cache.SetTime(Usd.TimeCode(float(tc)))
+            mats[i] = convert @ np.asarray(cache.GetLocalToWorldTransform(prim)).T
+        out.append(_obstacle(path, prim, times, mats, UsdGeom))
+    return out
+
+
+def _might_move(prim: Any, UsdGeom: Any) -> bool:
+    p = prim
+    while p and not p.IsPseudoRoot():
+        xf = UsdGeom.Xformable(p)
+        if xf and xf.TransformMightBeTimeVarying():
+            return True
+        p = p.GetParent()
+    return False
+
+
+def _axis_rotation(axis: str) -> Array:
+    """Rotation taking the local z to a USD gprim's ``axis``."""
+    if axis == "X":
+        return np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    if axis == "Y":
+        return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    return np.eye(3)
+
+
+def _obstacle(path: str, prim: Any, times: Array, mats: Array, UsdGeom: Any) -> Obstacle:
+    kind = str(prim.GetTypeName())
+    t0 = float(times[0])
+    axis_R = np.eye(3)
+    if kind in ("Cylinder", "Capsule", "Cone"):
+        axis_R = _axis_rotation(str(prim.GetAttribute("axis").Get(t0) or "Z"))
+    lin = mats[:, :3, :3] @ axis_R
+    u, s, vt = np.linalg.svd(lin)
+    if np.any(s[:, -1] <= 1e-12 * s[:, 0]) or np.any(np.linalg.det(lin) < 0):
+        msg = f"collision prim {path} has a degenerate or mirrored transform"
+        raise InputError(msg)
+    rot = u @ vt
+    scale = np.transpose(vt[0]) @ np.diag(s[0]) @ vt[0]  # the first frame's scale, local frame
+    poses = np.zeros_like(mats)
+    poses[:, :3, :3] = rot
+    poses[:, :3, 3] = mats[:, :3, 3]
+    poses[:, 3, 3] = 1.0
+    d = np.diag(scale)
+    diagonal = np.allclose(scale, np.diag(d), atol=1e-9 * d.max())
+    uniform = diagonal and np.allclose(d, d[0], rtol=1e-9)
+    radial = diagonal and math.isclose(d[0], d[1], rel_tol=1e-9)
+
+    def attr(name: str, default: float) -> float:
+        value = prim.GetAttribute(name).Get(t0)
+        return float(default if value is None else value)
+
+    shape, size = "", cast(tuple[float, ...], ())
+    if kind == "Cube" and diagonal:
+        shape, size = "box", tuple(attr("size", 2.0) * d)
+    elif kind == "Sphere" and uniform:
+        shape, size = "sphere", (attr("radius", 1.0) * d[0],)
+    elif kind in ("Cylinder", "Cone") and radial:
+        shape, size = kind.lower(), (attr("radius", 1.0) * d[0], attr("height", 2.0) * d[2])
+    elif kind == "Capsule" and uniform:
+        shape, size = "capsule", (attr("radius", 0.5) * d[0], attr("height", 1.0) * d[0])
+    if shape:
+        verts, tris = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        return Obstacle(path, shape, tuple(float(x) for x in size), verts, tris, times, poses,
+                        np.zeros(3), _bounding_radius(shape, size))
+    if kind == "Mesh":
+        mesh = UsdGeom.Mesh(prim)
+        points = np.asarray(mesh.GetPointsAttr().Get(t0), dtype=float).reshape(-1, 3)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(t0), dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(t0), dtype=np.int64)
+        if points.shape[0] < 3 or counts.sum() != indices.size:
+            msg = f"collision prim {path}: a mesh without points or with bad face indices"
+            raise InputError(msg)
+        verts = points @ scale.T
+        tris = _triangulate(counts, indices)
+        shape = "convex" if _is_convex(verts, tris) else "mesh"
+    else:
+        verts = _surface_points(kind, attr) @ scale.T
+        shape, tris = "convex", _hull(verts)
+    centre = 0.5 * (verts.min(axis=0) + verts.max(axis=0))
+    radius = float(np.linalg.norm(verts - centre, axis=1).max())
+    return Obstacle(path, shape, (), verts, tris, times, poses, centre, radius)
+
+
+def _bounding_radius(shape: str, size: tuple[float, ...]) -> float:
+    """Radius of a sphere about the centre that holds the primitive."""
+    if shape == "box":
+        return 0.5 * math.hypot(*size)
+    if shape == "sphere":
+        return size[0]
+    if shape == "capsule":
+        return size[0] + 0.5 * size[1]
+    return math.hypot(size[0], 0.5 * size[1])
+
+
+def _triangulate(counts: NDArray[np.int64], indices: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Fan triangulation of polygon faces, (t, 3)."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    tris = [np.stack([np.full(c - 2, indices[s]), indices[s + 1:s + c - 1],
+                      indices[s + 2:s + c]], axis=1)
+            for s, c in zip(starts, counts, strict=True) if c >= 3]
+    return np.concatenate(tris).astype(np.int64) if tris else np.zeros((0, 3), dtype=np.int64)
+
+
+def _hull(points: Array) -> NDArray[np.int64]:
+    from scipy.spatial import ConvexHull
+
+    return np.asarray(ConvexHull(points).simplices, dtype=np.int64)
+
+
+def _is_convex(verts: Array, tris: NDArray[np.int64]) -> bool:
+    """A closed mesh whose volume equals its convex hull's."""
+    from scipy.spatial import ConvexHull
+
+    if tris.shape[0] < 4:
+        return False
+    try:
+        hull = ConvexHull(verts)
+    except Exception:  # flat or degenerate point set: a surface
+        return False
+    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    volume = abs(float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
+    return bool(math.isclose(volume, float(hull.volume), rel_tol=1e-6))
+
+
+def _surface_points(kind: str, attr: Any) -> Array:
+    """Points on a gprim's surface in its own frame (axis along z), for a convex hull."""
+    ang = np.linspace(0.0, 2 * math.pi, 48, endpoint=False)
+    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], axis=1)
+    if kind == "Cube":
+        h = attr("size", 2.0) / 2
+        return np.array([[x, y, z] for x in (-h, h) for y in (-h, h) for z in (-h, h)])
+    if kind == "Sphere":
+        r = attr("radius", 1.0)
+        lat = np.linspace(-math.pi / 2, math.pi / 2, 25)
+        return np.concatenate([np.stack([r * math.cos(a) * ring[:, 0], r * math.cos(a) *
+                                         ring[:, 1], np.full(48, r * math.sin(a))], axis=1)
+                               for a in lat])
+    r, h = attr("radius", 0.5 if kind == "Capsule" else 1.0), attr(
+        "height", 1.0 if kind == "Capsule" else 2.0)
+    if kind == "Cone":
+        return np.vstack([r * ring + [0, 0, -h / 2], [[0.0, 0.0, h / 2]]])
+    if kind == "Cylinder":
+        return np.vstack([r * ring + [0, 0, -h / 2], r * ring + [0, 0, h / 2]])
+    lat = np.linspace(0.0, math.pi / 2, 13)  # capsule: two hemispheres
+    caps = [np.stack([r * math.cos(a) * ring[:, 0], r * math.cos(a) * ring[:, 1],
+                      np.full(48, sgn * (h / 2 + r * math.sin(a)))], axis=1)
+            for a in lat for sgn in (-1.0, 1.0)]
+    return np.concatenate(caps)
+
+
+# ---------------------------------------------------------------------------------------------
+# Distances
+# ---------------------------------------------------------------------------------------------
+
+
+def _coal_geometry(ob: Obstacle) -> Any:
+    if ob.shape == "box":
+        return coal.Box(*ob.size)
+    if ob.shape == "sphere":
+        return coal.Sphere(ob.size[0])
+    if ob.shape in ("cylinder", "capsule", "cone"):
+        return {"cylinder": coal.Cylinder, "capsule": coal.Capsule, "cone": coal.Cone}[
+            ob.shape](ob.size[0], ob.size[1])
+    model = coal.BVHModelOBBRSS()
+    model.beginModel(0, 0)
+    model.addVertices(np.ascontiguousarray(ob.vertices))
+    model.addTriangles(np.ascontiguousarray(ob.triangles))
+    model.endModel()
+    if ob.shape == "convex":
+        model.buildConvexHull(True, "Qt")
+        return model.convex
+    return model
+
+
+def _transform(T: Array) -> Any:
+    return coal.Transform3s(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+
+
+class CollisionModel:
+    """The robot's solids and the obstacles as coal objects, ready for distance queries."""
+
+    def __init__(self, robot: Robot, obstacles: list[Obstacle]) -> None:
+        self.robot = robot
+        self.solids = robot_solids(robot)
+        self.obstacles = obstacles
+        self.robot_geom = [coal.Box(*s.size) if s.shape == "box" else
+                           coal.Cylinder(s.size[0], s.size[1]) for s in self.solids]
+        self.robot_radius = np.array([0.5 * math.hypot(*s.size) if s.shape == "box" else
+                                      math.hypot(s.size[0], 0.5 * s.size[1])
+                                      for s in self.solids])
+        self.obstacle_geom = [_coal_geometry(ob) for ob in obstacles]
+
+    def link_name(self, i: int) -> str:
+        s = self.solids[i]
+        return f"{s.name} ({s.frame})"
+
+    def solid_poses(self, q: Array, base2world: Array) -> Array:
+        """(n, k, 4, 4) world pose of every robot solid at joint vectors q (n, 8)."""
+        frames = frame_poses(self.robot, q)
+        out = np.empty((q.shape[0], len(self.solids), 4, 4))
+        for j, s in enumerate(self.solids):
+            offset = np.eye(4)
+            offset[:3, 3] = s.xyz
+            out[:, j] = base2world @ frames[s.frame] @ offset
+        return out
+
+    def closest(self, q: Array, time_codes: Array, base2world: Array,
+                clearance: float) -> tuple[Array, Contact | None]:
+        """Signed distance of the closest robot-obstacle pair at each sample.
+
+        Exact distances are computed only for pairs closer than ``clearance + NEAR`` (coal's
+        collision test with that security margin decides, after a bounding-sphere test).
+
+        Returns:
+            (n,) distances [m] (inf where every pair is farther than ``clearance + NEAR``),
+            and the sample with the smallest distance below ``clearance`` as a
+            :class:`Contact` (None if none is).
+        """
+        n = q.shape[0]
+        best = np.full(n, np.inf)
+        if not self.obstacles:
+            return best, None
+        solids = self.solid_poses(q, base2world)
+        centres = solids[:, :, :3, 3]  # (n, k, 3)
+        worst: Contact | None = None
+        req = coal.DistanceRequest()
+        near = coal.CollisionRequest()
+        near.security_margin = clearance + NEAR
+        for o, ob in enumerate(self.obstacles):
+            poses = ob.pose_at(time_codes)
+            oc = poses[:, :3, :3] @ ob.centre + poses[:, :3, 3]  # (n, 3)
+            gap = (np.linalg.norm(centres - oc[:, None, :], axis=2) - self.robot_radius[None]
+                   - ob.radius)
+            geom = self.obstacle_geom[o]
+            for i, j in zip(*np.nonzero(gap < clearance + NEAR), strict=True):
+                T1, T2 = _transform(solids[i, j]), _transform(poses[i])
+                if not coal.collide(self.robot_geom[j], T1, geom, T2, near,
+                                    coal.CollisionResult()):
+                    continue
+                d = float(coal.distance(self.robot_geom[j], T1, geom, T2, req,
+                                        coal.DistanceResult()))
+                if d < best[i]:
+                    best[i] = d
+                if d < clearance and (worst is None or d < worst.distance):
+                    worst = Contact(int(i), d, self.link_name(int(j)), ob.path)
+        return best, worst
+
+
+def check_samples(
+    model: CollisionModel,
+    q: Array,
+    time_codes: Array,
+    frames: Array,
+    base2world: Array,
+    clearance: float,
+) -> float:
+    """Raise :class:`CollisionError` if any sample is closer than ``clearance``.
+
+    Args:
+        q: (n, 8) joint vectors; time_codes, frames: (n,) the stage time and film frame of each.
+
+    Returns:
+        The smallest distance [m] (inf when nothing came near).
+    """
+    dist, worst = model.closest(q, time_codes, base2world, clearance)
+    if worst is not None:
+        hit = sorted({int(f) for f in np.asarray(frames)[dist < clearance]})
+        raise collision_error(worst, int(frames[worst.sample]), clearance, hit)
+    return float(dist.min()) if dist.size else math.inf
+
+
+def collision_error(contact: Contact, frame: int, clearance: float,
+                    frames: list[int] | None = None) -> CollisionError:
+    """The error for a contact at film frame ``frame`` (``frames``: every frame that hits)."""
+    if contact.distance < 0:
+        what = f"goes {100 * -contact.distance:.1f} cm into {contact.prim}"
+    else:
+        what = f"passes {100 * contact.distance:.1f} cm from {contact.prim}"
+    also = f" ({frame_ranges(frames)} too close)" if frames and frames != [frame] else ""
+    msg = (f"frame {frame}: the robot's {contact.link} {what} (clearance "
+           f"{100 * clearance:.1f} cm){also}; move the robot or the set piece")
+    return CollisionError(msg, frame=frame, link=contact.link, prim=contact.prim,
+                          distance=contact.distance, clearance=clearance)
+
+
+def take_samples(robot: Robot, q: Array, frame_samples: NDArray[Any],
+                 step: float = 0.02) -> NDArray[np.int64]:
+    """Indices of the servo samples to check: every film frame, and between samples wherever
+    some point of the robot (a link origin) has moved ``step`` [m] since the last one checked.
+    """
+    origins = robot.link_frames(q)[:, :, :3, 3]  # (m, 9, 3)
+    moved = np.linalg.norm(np.diff(origins, axis=0), axis=2).max(axis=1)
+    travel = np.concatenate([[0.0], np.cumsum(moved)])
+    marks = np.flatnonzero(np.diff(np.floor(travel / step)) > 0) + 1
+    keep = np.union1d(np.asarray(frame_samples, dtype=np.int64), marks)
+    return np.union1d(keep, [0, q.shape[0] - 1]).astype(np.int64)
+
+
+def sample_times(t: Array, frame_times: Array, time_codes: Array) -> Array:
+    """Stage time code of take times t: the frames' time codes, held before and after the shot."""
+    return np.interp(t, frame_times, time_codes)
+
+
+def check_take(
+    shot_path: str | Path,
+    robot: Robot,
+    base2world: Array,
+    take: Any,
+    shot_time_codes: Array,
+    patterns: tuple[str, ...],
+    clearance: float,
+) -> float:
+    """Check a timed take against the set's obstacles; the smallest distance [m].
+
+    Args:
+        take: A :class:`camtraj.timing.Take` (its servo samples are checked).
+        shot_time_codes: (n,) stage time code of every film frame.
+
+    Raises:
+        CollisionError: Closer than ``clearance`` somewhere (names frame, link, prim, depth).
+        InputError: A pattern matches nothing.
+    """
+    obstacles = read_obstacles(shot_path, patterns, shot_time_codes)
+    model = CollisionModel(robot, obstacles)
+    idx = take_samples(robot, take.q, take.frame_samples)
+    t = take.t[idx]
+    tcs = sample_times(t, take.frame_times, shot_time_codes)
+    # the film frame at or after each sample (the run-up reports the first frame)
+    at = np.searchsorted(take.frame_times, t - 1e-12).clip(0, len(take.frame_numbers) - 1)
+    return check_samples(model, take.q[idx], tcs, take.frame_numbers[at], base2world, clearance)

@@ -1,0 +1,262 @@
+"""The set file: where the robot stands and what the set allows (a small TOML file).
+
+One format for what people write by hand and what ``camtraj place -o`` writes; ``convert
+--set-file`` and ``check --set-file`` read it as it is. Every table is optional::
+
+    [placement]            # the robot base in the converted world: metres, Z-up (as --placement)
+    x = 12.5
+    y = -3.0
+    z = 0.0
+    yaw_deg = 30.0         # or rotation = [[...], [...], [...]] (3x3), not both
+
+    [floor]                # stage units and stage axes (as the USD stage is authored)
+    height = 0.0           # the floor's up coordinate; `place` stands the base on it
+    region = [[0, 0, 0], [2000, 0, 0], [2000, 0, 1500], [0, 0, 1500]]   # where the track may lie
+    keep_out = [[[500, 0, 500], [700, 0, 500], [700, 0, 700]]]          # polygons to keep off
+
+    [search]               # yaw of the track about up [deg], in the converted (Z-up) world
+    yaw_deg = 30.0         # a fixed yaw, or
+    yaw_range_deg = [-45.0, 45.0]
+
+    [collision]
+    prims = ["/World/set/wall", "/World/props/*"]   # prim paths or glob patterns (default none)
+    clearance_m = 0.05     # the distance the robot must keep from them [m]
+
+Polygon points are three stage coordinates each ``[x, y, z]``; the up coordinate is ignored (a
+Y-up stage's floor is its x-z plane). Errors are :class:`~camtraj.errors.InputError` with one
+line naming the file, the key and the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camtraj.errors import InputError
+
+Array = NDArray[np.float64]
+
+_KEYS: dict[str, set[str]] = {
+    "placement": {"x", "y", "z", "yaw_deg", "rotation"},
+    "floor": {"height", "region", "keep_out"},
+    "search": {"yaw_deg", "yaw_range_deg"},
+    "collision": {"prims", "clearance_m"},
+}
+MAX_CLEARANCE_M = 5.0
+
+
+@dataclass(frozen=True)
+class SetFile:
+    """A parsed set file (see the module docstring for the format).
+
+    Attributes:
+        source: Where it came from (the path, for messages).
+        base2world: The ``[placement]`` as a 4x4 transform [m], or None when absent.
+        floor_height: The floor's up coordinate [stage units].
+        region: Polygon (k, 3) [stage units] where the track may lie, or None (anywhere).
+        keep_out: Polygons (k, 3) [stage units] no part of the track may touch.
+        yaw_range_deg: Allowed yaw of the track (lo, hi) [deg]; lo == hi for a fixed yaw.
+        prims: Prim paths or glob patterns of obstacles on the shot's stage.
+        clearance_m: Required distance between the robot and the obstacles [m].
+    """
+
+    source: str = "<none>"
+    base2world: Array | None = None
+    floor_height: float = 0.0
+    region: Array | None = None
+    keep_out: tuple[Array, ...] = ()
+    yaw_range_deg: tuple[float, float] | None = None
+    prims: tuple[str, ...] = ()
+    clearance_m: float = 0.0
+    raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def read(cls, path: str | Path) -> SetFile:
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            msg = f"set file {path}: cannot read it ({exc.strerror or exc})"
+            raise InputError(msg) from exc
+        return cls.parse(text, str(path))
+
+    @classmethod
+    def parse(cls, text: str, source: str = "<text>") -> SetFile:
+        where = f"set file {source}"
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            msg = f"{where}: not valid TOML ({exc})"
+            raise InputError(msg) from exc
+        _allowed(data, set(_KEYS), where, "the top level")
+        tables = {}
+        for name, keys in _KEYS.items():
+            table = data.get(name, {})
+            if not isinstance(table, dict):
+                msg = f"{where}: [{name}] must be a table"
+                raise InputError(msg)
+            _allowed(table, keys, where, f"[{name}]")
+            tables[name] = table
+        floor, search, coll = tables["floor"], tables["search"], tables["collision"]
+        region = None
+        if "region" in floor:
+            region = _polygon(floor["region"], where, "floor.region")
+        keep_out_val = floor.get("keep_out", [])
+        if not isinstance(keep_out_val, list):
+            msg = f"{where}: [floor] keep_out must be a list of polygons"
+            raise InputError(msg)
+        keep_out = tuple(_polygon(p, where, f"floor.keep_out[{i}]")
+                         for i, p in enumerate(keep_out_val))
+        if "yaw_deg" in search and "yaw_range_deg" in search:
+            msg = f"{where}: give either yaw_deg or yaw_range_deg in [search], not both"
+            raise InputError(msg)
+        yaw_range: tuple[float, float] | None = None
+        if "yaw_deg" in search:
+            yaw = _number(search["yaw_deg"], where, "search.yaw_deg", -360.0, 360.0)
+            yaw_range = (yaw, yaw)
+        elif "yaw_range_deg" in search:
+            lo, hi = _numbers(search["yaw_range_deg"], 2, where, "search.yaw_range_deg")
+            if not -360.0 <= lo <= hi <= lo + 360.0 <= 720.0:
+                msg = (f"{where}: [search] yaw_range_deg = [{lo:g}, {hi:g}] must be [lo, hi] "
+                       "with lo <= hi <= lo + 360, each within [-360, 360] deg")
+                raise InputError(msg)
+            yaw_range = (lo, hi)
+        prims = coll.get("prims", [])
+        if not isinstance(prims, list) or not all(
+                isinstance(p, str) and p.startswith("/") for p in prims):
+            msg = (f"{where}: [collision] prims must be a list of absolute prim paths or "
+                   'patterns, e.g. ["/World/set/*"]')
+            raise InputError(msg)
+        clearance = _number(coll.get("clearance_m", 0.0), where, "collision.clearance_m",
+                            0.0, MAX_CLEARANCE_M)
+        return cls(
+            source=source,
+            base2world=_placement(tables["placement"], where) if "placement" in data else None,
+            floor_height=_number(floor.get("height", 0.0), where, "floor.height", -1e6, 1e6),
+            region=region,
+            keep_out=keep_out,
+            yaw_range_deg=yaw_range,
+            prims=tuple(prims),
+            clearance_m=clearance,
+            raw=data,
+        )
+
+
+def floor_xy(points: Array, meters_per_unit: float, up_axis: str) -> Array:
+    """Stage points (k, 3) [stage units] -> floor coordinates (k, 2) in the converted world [m].
+
+    The same conversion as :mod:`camtraj.usd_shot`: scale by ``metersPerUnit``; a Y-up stage's
+    (x, y, z) becomes (x, -z, y) in the Z-up world.
+    """
+    p = np.asarray(points, dtype=float) * meters_per_unit
+    if up_axis == "Y":
+        return np.stack([p[:, 0], -p[:, 2]], axis=1)
+    return p[:, :2].copy()
+
+
+def to_toml(base2world: Array, raw: dict[str, Any]) -> str:
+    """A set file: ``raw``'s tables as they were, with ``[placement]`` replaced by ``base2world``.
+
+    The placement is written as x, y, z and yaw_deg (``base2world`` must be a yaw about up).
+    """
+    R, t = base2world[:3, :3], base2world[:3, 3]
+    yaw = math.degrees(math.atan2(R[1, 0], R[0, 0]))
+    lines = ["# camtraj set file (written by camtraj place)", "",
+             "[placement]  # robot base in the converted world: metres, Z-up",
+             f"x = {float(t[0])!r}", f"y = {float(t[1])!r}", f"z = {float(t[2])!r}",
+             f"yaw_deg = {yaw!r}"]
+    for name in ("floor", "search", "collision"):
+        table = raw.get(name)
+        if not table:
+            continue
+        lines += ["", f"[{name}]"]
+        lines += [f"{key} = {_toml_value(value)}" for key, value in table.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value)
+
+
+def _allowed(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        msg = (f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
+               f"allowed: {', '.join(sorted(allowed))}")
+        raise InputError(msg)
+
+
+def _number(value: Any, where: str, key: str, lo: float, hi: float) -> float:
+    table, _, name = key.rpartition(".")
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        msg = f"{where}: [{table}] {name} = {value!r} must be a finite number in [{lo:g}, {hi:g}]"
+        raise InputError(msg)
+    if not lo <= value <= hi:
+        msg = f"{where}: [{table}] {name} = {value!r} is outside [{lo:g}, {hi:g}]"
+        raise InputError(msg)
+    return float(value)
+
+
+def _numbers(value: Any, n: int, where: str, key: str) -> tuple[float, ...]:
+    table, _, name = key.rpartition(".")
+    ok = isinstance(value, list) and len(value) == n and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in value)
+    if not ok:
+        msg = f"{where}: [{table}] {name} = {value!r} must be {n} finite numbers"
+        raise InputError(msg)
+    return tuple(float(v) for v in value)
+
+
+def _polygon(value: Any, where: str, key: str) -> Array:
+    table, _, name = key.partition(".")
+    ok = isinstance(value, list) and len(value) >= 3 and all(
+        isinstance(p, list) and len(p) == 3 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in p)
+        for p in value)
+    if not ok:
+        msg = (f"{where}: [{table}] {name} must be a polygon of at least 3 points, each "
+               "[x, y, z] finite numbers in stage units")
+        raise InputError(msg)
+    return np.array(value, dtype=float)
+
+
+def _placement(table: dict[str, Any], where: str) -> Array:
+    vals = {k: _number(table.get(k, 0.0), where, f"placement.{k}", -1e6, 1e6)
+            for k in ("x", "y", "z")}
+    yaw = _number(table.get("yaw_deg", 0.0), where, "placement.yaw_deg", -360.0, 360.0)
+    T = np.eye(4)
+    T[:3, 3] = (vals["x"], vals["y"], vals["z"])
+    if "rotation" in table:
+        if "yaw_deg" in table:
+            msg = f"{where}: give either yaw_deg or rotation in [placement], not both"
+            raise InputError(msg)
+        rot = table["rotation"]
+        ok = isinstance(rot, list) and len(rot) == 3 and all(
+            isinstance(r, list) and len(r) == 3 and all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in r)
+            for r in rot)
+        R = np.array(rot, dtype=float) if ok else np.zeros((3, 3))
+        if not ok or not np.all(np.isfinite(R)) or not np.allclose(
+                R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            msg = f"{where}: [placement] rotation must be a 3x3 proper rotation matrix of numbers"
+            raise InputError(msg)
+        T[:3, :3] = R
+    else:
+        a = math.radians(yaw)
+        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                     [0.0, 0.0, 1.0]]
+    return T

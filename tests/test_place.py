@@ -1,0 +1,258 @@
+"""camtraj place end to end: the issue's acceptance tests.
+
+Independent facts: the brute-force grid is evaluated with the public pipeline
+(``convert.analyse`` at each placement), the keep-out test reads the rail's footprint from the
+URDF text, and the clearance is recomputed with coal from the MCAP's joint samples.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import coal
+import numpy as np
+import pytest
+import shapely
+from pxr import Usd, UsdGeom
+
+from camtraj.convert import analyse
+from camtraj.errors import CamtrajError
+from camtraj.mcap_io import read_take
+from camtraj.options import ConvertOptions
+from camtraj.robot import Robot
+from camtraj.urdf import frame_poses, robot_solids, robot_urdf
+from tests.shots import base_move, placement, write_shot
+
+TRUE = (-37.0, 52.0, 121.0)  # a placement that can do the far shot (x, y [m], yaw [deg])
+HALF = 0.75  # the search region: TRUE +- HALF metres, yaw TRUE +- 15 deg
+
+
+def run(*args: object) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "camtraj", *map(str, args)],
+                          capture_output=True, text=True, check=False)
+
+
+def region_toml(up_axis: str, mpu: float, extra: str = "") -> str:
+    """A set file in the stage's units and axes: yaw fixed at TRUE's, and a floor region that
+    holds the rail exactly when the base is within HALF of TRUE (a square search region)."""
+    x, y, yaw = TRUE
+    rail = next(s for s in robot_solids(Robot.default()) if s.name == "rail")
+    a = math.radians(yaw)
+    u, v = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    along = (rail.xyz[0] - rail.size[0] / 2 - HALF, rail.xyz[0] + rail.size[0] / 2 + HALF)
+    side = rail.size[1] / 2 + HALF
+    ring = [np.array([x, y]) + s * u + t * v for s, t in
+            ((along[0], -side), (along[1], -side), (along[1], side), (along[0], side))]
+    if up_axis == "Y":
+        stage = [[p[0] / mpu, 0.0, -p[1] / mpu] for p in ring]
+    else:
+        stage = [[p[0] / mpu, p[1] / mpu, 0.0] for p in ring]
+    return f"[floor]\nregion = {json.dumps(stage)}\n{extra}\n[search]\nyaw_deg = {yaw}\n"
+
+
+def in_square(x: float, y: float) -> bool:
+    """Whether a base position is in the search region (TRUE +- HALF in the track's axes)."""
+    a = math.radians(TRUE[2])
+    dx, dy = x - TRUE[0], y - TRUE[1]
+    s, t = math.cos(a) * dx + math.sin(a) * dy, -math.sin(a) * dx + math.cos(a) * dy
+    return abs(s) <= HALF + 1e-6 and abs(t) <= HALF + 1e-6
+
+
+@pytest.fixture(scope="module")
+def far(tmp_path_factory: pytest.TempPathFactory, robot: Robot) -> dict[str, Any]:
+    """The far shot (Z-up metres), placed by camtraj place."""
+    d = tmp_path_factory.mktemp("far")
+    move = placement(*TRUE) @ base_move(robot)
+    shot = write_shot(d / "far.usda", move)
+    set_file = d / "region.toml"
+    set_file.write_text(region_toml("Z", 1.0))
+    placed = d / "placed.toml"
+    proc = run("place", shot, "--set-file", set_file, "-o", placed, "--json", "-j", "2")
+    assert proc.returncode == 0, proc.stderr
+    return {"dir": d, "move": move, "shot": shot, "set": set_file, "placed": placed,
+            "report": json.loads(proc.stdout)}
+
+
+def test_place_finds_a_placement_convert_takes_at_shot_timing(far: dict[str, Any]) -> None:
+    best = far["report"]["placements"][0]
+    assert best["ok"] and best["full"] and best["max_speed"] >= 1.0
+    out = far["dir"] / "far.mcap"
+    proc = run("convert", far["shot"], "--set-file", far["placed"], "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    take = read_take(out)
+    assert take.metadata["timing_mode"] == "shot"
+    placed = json.loads(take.metadata["placement"])
+    assert np.allclose(placed["translation_m"][:2], [best["x"], best["y"]], atol=1e-9)
+
+
+def brute_force_speed(shot: Path, x: float, y: float, yaw: float) -> float:
+    """Max feasible speed of a placement through the public pipeline (0 if it cannot)."""
+    try:
+        a = analyse(shot, ConvertOptions(placement=(x, y, 0.0, yaw), timing="scale"))
+    except CamtrajError:
+        return 0.0
+    assert a.take is not None
+    return float(a.take.report.max_speed) if not a.take.report.limiting else 0.0
+
+
+def test_found_placement_is_among_the_best_of_a_brute_force_grid(far: dict[str, Any]) -> None:
+    x0, y0, yaw = TRUE
+    a = math.radians(yaw)
+    u, v = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    steps = np.linspace(-HALF, HALF, 4)
+    grid = [np.array([x0, y0]) + s * u + t * v for s in steps for t in steps]
+    speeds = sorted((brute_force_speed(far["shot"], g[0], g[1], yaw) for g in grid),
+                    reverse=True)
+    assert speeds[0] > 1.0  # the grid holds feasible placements
+    best = far["report"]["placements"][0]
+    assert in_square(best["x"], best["y"]) and best["yaw_deg"] == pytest.approx(yaw)
+    found = brute_force_speed(far["shot"], best["x"], best["y"], best["yaw_deg"])
+    assert found == pytest.approx(best["max_speed"], rel=1e-6)
+    assert found >= speeds[2] - 0.01, (found, speeds[:5])
+
+
+def rail_polygon(robot: Robot, x: float, y: float, yaw: float) -> shapely.Polygon:
+    """The rail's footprint from the URDF's base_link box visual."""
+    root = ET.fromstring(robot_urdf(robot))
+    vis = root.find("link[@name='base_link']/visual")
+    assert vis is not None
+    cx, cy, _ = (float(v) for v in vis.find("origin").get("xyz").split())  # type: ignore[union-attr]
+    sx, sy, _ = (float(v) for v in vis.find("geometry/box").get("size").split())  # type: ignore[union-attr]
+    a = math.radians(yaw)
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    local = np.array([[cx - sx / 2, cy - sy / 2], [cx + sx / 2, cy - sy / 2],
+                      [cx + sx / 2, cy + sy / 2], [cx - sx / 2, cy + sy / 2]])
+    return shapely.Polygon(local @ R.T + [x, y])
+
+
+def test_keep_out_over_the_best_placement_moves_the_answer_outside(
+        far: dict[str, Any], robot: Robot) -> None:
+    best = far["report"]["placements"][0]
+    bx, by = best["x"], best["y"]
+    square = [[bx - 0.3, by - 0.3, 0.0], [bx + 0.3, by - 0.3, 0.0], [bx + 0.3, by + 0.3, 0.0],
+              [bx - 0.3, by + 0.3, 0.0]]
+    assert rail_polygon(robot, bx, by, best["yaw_deg"]).intersects(shapely.Polygon(
+        [p[:2] for p in square]))
+    set_file = far["dir"] / "keep_out.toml"
+    set_file.write_text(region_toml("Z", 1.0, f"keep_out = [{json.dumps(square)}]"))
+    proc = run("place", far["shot"], "--set-file", set_file, "--json", "-j", "1")
+    assert proc.returncode == 0, proc.stderr
+    new = json.loads(proc.stdout)["placements"][0]
+    rail = rail_polygon(robot, new["x"], new["y"], new["yaw_deg"])
+    assert not rail.intersects(shapely.Polygon([p[:2] for p in square]))
+    assert new["ok"]
+
+
+def test_y_up_centimetre_stage_gives_the_same_placement(far: dict[str, Any]) -> None:
+    d = far["dir"]
+    shot = write_shot(d / "far_yup.usda", far["move"], up_axis="Y", mpu=0.01)
+    set_file = d / "region_yup.toml"
+    set_file.write_text(region_toml("Y", 0.01))
+    proc = run("place", shot, "--set-file", set_file, "--json", "-j", "1")
+    assert proc.returncode == 0, proc.stderr
+    a, b = json.loads(proc.stdout)["placements"][0], far["report"]["placements"][0]
+    assert abs(a["x"] - b["x"]) < 1e-3 and abs(a["y"] - b["y"]) < 1e-3
+    assert abs(a["yaw_deg"] - b["yaw_deg"]) < 1e-3
+
+
+# ---------------------------------------------------------------------------------------------
+# Collisions: a wall the default placement drives the arm through
+# ---------------------------------------------------------------------------------------------
+
+WALL = (placement(2.6, 0.0, 0.0, 2.05), (0.2, 6.0, 4.0))  # centre pose, edge lengths [m]
+
+
+@pytest.fixture(scope="module")
+def wall(tmp_path_factory: pytest.TempPathFactory, robot: Robot) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("wall")
+    shot = write_shot(d / "wall.usda", base_move(robot), boxes={"wall": WALL})
+    check = d / "wall.toml"
+    check.write_text('[collision]\nprims = ["/World/set/*"]\nclearance_m = 0.1\n')
+    search = d / "search.toml"
+    search.write_text('[floor]\nregion = [[2.8, -1.5, 0], [21, -1.5, 0], [21, 1.5, 0], '
+                      '[2.8, 1.5, 0]]\n[search]\nyaw_range_deg = [-8.0, 8.0]\n'
+                      '[collision]\nprims = ["/World/set/wall"]\n')
+    return {"dir": d, "shot": shot, "check": check, "search": search}
+
+
+def test_check_reports_the_collision_with_frame_link_and_prim(wall: dict[str, Path]) -> None:
+    proc = run("check", wall["shot"], "--set-file", wall["check"], "--json")
+    assert proc.returncode == 3, proc.stderr
+    r = json.loads(proc.stdout)
+    assert r["status"] == "collision" and r["prim"] == "/World/set/wall"
+    assert 1 <= r["frame"] <= 48 and "link" in r["link"] and r["distance_m"] < 0
+    assert f"frame {r['frame']}" in r["message"] and "/World/set/wall" in r["message"]
+    proc = run("convert", wall["shot"], "--set-file", wall["check"], "-o",
+               wall["dir"] / "x.mcap")
+    assert proc.returncode == 3 and "/World/set/wall" in proc.stderr
+    assert not (wall["dir"] / "x.mcap").exists()
+
+
+def wall_distances(robot: Robot, q: np.ndarray, base2world: np.ndarray, shot: Path) -> float:
+    """Smallest coal distance between the robot's solids and the wall, read from the USD."""
+    stage = Usd.Stage.Open(str(shot))
+    M = np.asarray(UsdGeom.Xformable(stage.GetPrimAtPath("/World/set/wall"))
+                   .ComputeLocalToWorldTransform(Usd.TimeCode(1))).T
+    size = np.linalg.norm(M[:3, :3], axis=0)  # a unit cube scaled along its axes
+    wall_pose = coal.Transform3s(M[:3, :3] / size, M[:3, 3])
+    wall_box = coal.Box(*size)
+    poses = frame_poses(robot, q)
+    best = math.inf
+    for s in robot_solids(robot):
+        geom = coal.Box(*s.size) if s.shape == "box" else coal.Cylinder(*s.size)
+        offset = np.eye(4)
+        offset[:3, 3] = s.xyz
+        T = base2world @ poses[s.frame] @ offset
+        for Ti in T:
+            res = coal.DistanceResult()
+            d = coal.distance(geom, coal.Transform3s(Ti[:3, :3], Ti[:3, 3]), wall_box,
+                              wall_pose, coal.DistanceRequest(), res)
+            best = min(best, d)
+    return best
+
+
+@pytest.mark.parametrize("clearance", [0.3])
+def test_place_with_the_wall_as_obstacle_keeps_the_clearance(
+        wall: dict[str, Path], robot: Robot, clearance: float) -> None:
+    placed = wall["dir"] / "placed.toml"
+    proc = run("place", wall["shot"], "--set-file", wall["search"], "--clearance", clearance,
+               "-o", placed, "-j", "1")
+    assert proc.returncode == 0, proc.stderr
+    out = wall["dir"] / "placed.mcap"
+    proc = run("convert", wall["shot"], "--set-file", placed, "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    take = read_take(out)
+    base2world = np.eye(4)
+    meta = json.loads(take.metadata["placement"])
+    base2world[:3, :3] = meta["rotation"]
+    base2world[:3, 3] = meta["translation_m"]
+    q = take.q[::2]  # every other servo sample of the whole take (run-up and run-out too)
+    assert wall_distances(robot, q, base2world, wall["shot"]) >= clearance - 1e-3
+
+
+@pytest.mark.parametrize(
+    ("shift", "stretch", "words"),
+    [
+        ((0.0, 0.0, 0.0), 60.0, ["camera path is", "long", "track"]),
+        ((0.0, 0.0, 15.0), 0.0, ["height above the floor", "lift's reach"]),
+    ],
+)
+def test_a_shot_no_placement_can_do_is_exit_3_with_the_reason(
+        tmp_path: Path, robot: Robot, shift: tuple[float, float, float], stretch: float,
+        words: list[str]) -> None:
+    move = base_move(robot)
+    move[:, :3, 3] += shift
+    move[:, 0, 3] += np.linspace(0.0, stretch, move.shape[0])  # a 60 m long dolly move
+    shot = write_shot(tmp_path / "no.usda", move)
+    proc = run("place", shot, "-o", tmp_path / "p.toml")
+    assert proc.returncode == 3, proc.stderr
+    assert proc.stderr.startswith("ERROR: ") and proc.stderr.count("\n") == 1
+    for w in words:
+        assert w in proc.stderr
+    assert not (tmp_path / "p.toml").exists()

@@ -1,0 +1,116 @@
+"""Set files: the format people write and ``camtraj place`` writes, and its strict checks."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from camtraj.convert import load_placement
+from camtraj.errors import InputError
+from camtraj.options import ConvertOptions
+from camtraj.set_file import SetFile, floor_xy, to_toml
+from camtraj.usd_shot import YUP2ZUP
+
+FULL = """
+[placement]
+x = 12.5
+y = -3
+z = 0.25
+yaw_deg = 30
+
+[floor]
+height = 10
+region = [[0, 0, 0], [2000, 0, 0], [2000, 0, 1500], [0, 0, 1500]]
+keep_out = [[[500, 0, 500], [700, 0, 500], [700, 0, 700]]]
+
+[search]
+yaw_range_deg = [-45, 45.5]
+
+[collision]
+prims = ["/World/set/wall", "/World/props/*"]
+clearance_m = 0.05
+"""
+
+
+def test_full_file_parses() -> None:
+    sf = SetFile.parse(FULL, "s.toml")
+    assert sf.base2world is not None
+    assert np.allclose(sf.base2world[:3, 3], [12.5, -3.0, 0.25])
+    a = math.radians(30.0)
+    assert np.allclose(sf.base2world[:2, :2], [[math.cos(a), -math.sin(a)],
+                                                [math.sin(a), math.cos(a)]])
+    assert sf.floor_height == 10.0 and sf.region is not None and sf.region.shape == (4, 3)
+    assert len(sf.keep_out) == 1 and sf.yaw_range_deg == (-45.0, 45.5)
+    assert sf.prims == ("/World/set/wall", "/World/props/*") and sf.clearance_m == 0.05
+
+
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("[floor]\nheigth = 1\n", ["s.toml", "heigth", "[floor]", "allowed"]),
+        ("[bogus]\n", ["s.toml", "bogus", "top level"]),
+        ("[floor]\nregion = [[0, 0, 0], [1, 0], [1, 1, 0]]\n", ["s.toml", "[floor] region",
+                                                                "[x, y, z]"]),
+        ('[floor]\nregion = [[0, 0, 0], [1, 0, "a"], [1, 1, 0]]\n', ["[floor] region"]),
+        ("[floor]\nregion = [[0, 0, 0], [1, 0, 0]]\n", ["at least 3 points"]),
+        ("[floor]\nkeep_out = [[0, 0, 0]]\n", ["[floor] keep_out[0]"]),
+        ("[search]\nyaw_deg = 400\n", ["[search] yaw_deg", "[-360, 360]"]),
+        ("[search]\nyaw_deg = 1\nyaw_range_deg = [0, 1]\n", ["either yaw_deg or"]),
+        ("[search]\nyaw_range_deg = [10, 0]\n", ["[search] yaw_range_deg", "lo <= hi"]),
+        ("[search]\nyaw_range_deg = [10]\n", ["[search] yaw_range_deg", "2 finite numbers"]),
+        ("[collision]\nclearance_m = -1\n", ["[collision] clearance_m", "[0, 5]"]),
+        ('[collision]\nclearance_m = "5cm"\n', ["[collision] clearance_m", "finite number"]),
+        ('[collision]\nprims = ["wall"]\n', ["[collision] prims", "absolute"]),
+        ('[placement]\nx = "1"\n', ["[placement] x", "finite number"]),
+        ("[placement]\nrotation = [[1, 0, 0], [0, 1], [0, 0, 1]]\n", ["rotation", "3x3"]),
+        ("[placement]\nyaw_deg = 1\nrotation = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n",
+         ["either yaw_deg or rotation"]),
+        ("[placement\n", ["not valid TOML"]),
+        ("floor = 3\n", ["[floor] must be a table"]),
+    ],
+)
+def test_errors_are_one_line_naming_file_and_key(text: str, words: list[str]) -> None:
+    with pytest.raises(InputError) as info:
+        SetFile.parse(text, "s.toml")
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith("set file s.toml: ")
+    for w in words:
+        assert w in msg
+
+
+def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> None:
+    sf = SetFile.parse(FULL, "s.toml")
+    T = np.eye(4)
+    a = math.radians(-71.25)
+    T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
+    T[:3, 3] = (-40.1, 56.3, 0.1)
+    path = tmp_path / "placed.toml"
+    path.write_text(to_toml(T, sf.raw))
+    data = tomllib.loads(path.read_text())  # plain TOML, as a person reads it
+    assert data["placement"]["yaw_deg"] == pytest.approx(-71.25)
+    back = SetFile.read(path)
+    assert back.base2world is not None and np.allclose(back.base2world, T)
+    assert back.prims == sf.prims and back.clearance_m == sf.clearance_m
+    assert back.region is not None and sf.region is not None
+    assert np.array_equal(back.region, sf.region) and back.yaw_range_deg == sf.yaw_range_deg
+    placement = load_placement(ConvertOptions(set_file=str(path)))
+    assert np.allclose(placement.base2world, T)
+
+
+def test_file_without_placement_places_at_the_origin(tmp_path: Path) -> None:
+    path = tmp_path / "set.toml"
+    path.write_text("[collision]\nprims = [\"/World/wall\"]\n")
+    assert np.array_equal(load_placement(ConvertOptions(set_file=str(path))).base2world,
+                          np.eye(4))
+
+
+def test_floor_points_convert_like_the_camera() -> None:
+    """A Y-up centimetre point lands where usd_shot puts a camera at the same stage point."""
+    p = np.array([[120.0, 35.0, -410.0]])
+    expected = (YUP2ZUP @ p[0]) * 0.01
+    assert np.allclose(floor_xy(p, 0.01, "Y")[0], expected[:2])
+    assert np.allclose(floor_xy(p, 1.0, "Z")[0], p[0, :2])
