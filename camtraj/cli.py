@@ -61,8 +61,11 @@ def main() -> None:
 @more_convert_options
 @click.option("--summary", type=click.Path(dir_okay=False), metavar="FILE.json",
               help="Also write the run's summary as JSON.")
+@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+              help="Also write the HTML report (plots of every axis, top and side views).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
-def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any) -> None:
+def convert(shot: str, output: str, summary: str | None, report: str | None, quiet: bool,
+            **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
 
     Every frame is solved for the robot (SM inverse kinematics), the move is timed at the
@@ -74,7 +77,10 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
     try:
         if summary is not None:
             _check_writable(summary, "--summary")
-        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet))
+        if report is not None:
+            _check_writable(report, "--report")
+        result = run(shot, output, _options(kw), progress=_progress_wanted(quiet),
+                     report=report)
         if summary is not None:
             try:
                 write_json_atomic(_path(summary), result)
@@ -93,8 +99,11 @@ def convert(shot: str, output: str, summary: str | None, quiet: bool, **kw: Any)
 @convert_options
 @more_convert_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+              help="Also write the HTML report; for a shot that cannot be done it shows "
+              "where and why.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
+def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) -> None:
     """Check whether the robot can do SHOT as asked, writing nothing.
 
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
@@ -106,7 +115,9 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     options = None
     try:
         options = _options(kw)
-        result = run(shot, None, options, progress=_progress_wanted(quiet))
+        if report is not None:
+            _check_writable(report, "--report")
+        result = run(shot, None, options, progress=_progress_wanted(quiet), report=report)
     except UnreachableFramesError as exc:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
@@ -159,6 +170,22 @@ def info(mcap_file: str, as_json: bool) -> None:
             v = conv(limits["max_velocity"][i])
             lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
     click.echo("\n".join(lines))
+
+
+@main.command("report")
+@click.argument("mcap_file", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              metavar="REPORT.html", help="The HTML file to write (atomically).")
+def report_command(mcap_file: str, output: str) -> None:
+    """Write the HTML report of a converted take (MCAP_FILE): one self-contained page with
+    the summary, every axis's use of its limits over take time, and top and side views."""
+    from camtraj.report import report_from_mcap, write_report
+
+    try:
+        _check_writable(output, "-o")
+        write_report(output, report_from_mcap(mcap_file))
+    except CamtrajError as exc:
+        _fail(exc)
 
 
 main.add_command(batch_command, "batch")

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import camtraj
-from camtraj.errors import InputError
+from camtraj.errors import InfeasibleError, InputError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.mcap_io import TakeData, write_take
 from camtraj.options import ConvertOptions
@@ -145,6 +145,7 @@ def analyse(
     *,
     progress: Callable[[int], None] | None = None,
     on_frames: Callable[[int], None] | None = None,
+    on_start: Callable[[Analysis], None] | None = None,
 ) -> Analysis:
     """Read, place, solve and time a shot. Raises the stage's typed error on failure.
 
@@ -153,6 +154,8 @@ def analyse(
         options: What to do.
         progress: Called with the number of frames the IK just finished.
         on_frames: Called once with the frame count before the IK starts.
+        on_start: Called once with the analysis before the IK starts; it is filled in as the
+            stages finish, so after a failure it holds what was computed (for a report).
     """
     timings: dict[str, float] = {}
     with _stage(timings, "read"):
@@ -164,6 +167,8 @@ def analyse(
             raise InputError(msg)
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
+    if on_start is not None:
+        on_start(analysis)
     if on_frames is not None:
         on_frames(int(shot.frames.shape[0]))
     with _stage(timings, "ik"):
@@ -187,23 +192,51 @@ def convert(
     options: ConvertOptions | None = None,
     *,
     progress: bool = False,
+    report: str | Path | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
     With ``output_path`` None nothing is written (``camtraj check``). Raises ``InputError``
     (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
     run writes nothing and leaves an existing output untouched.
+
+    ``report``: also write the HTML report (camtraj.report) there, after the MCAP (if that
+    fails, the MCAP is removed again). Without an MCAP (``check``) a shot that cannot be done
+    gets its report too, showing why, before the error is raised.
     """
     options = options or ConvertOptions()
     bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
+    started: list[Analysis] = []
     try:
-        analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)
+        analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start,
+                           on_start=started.append)
+    except InfeasibleError as exc:
+        if report is not None and output_path is None and started:
+            from camtraj import report as html_report
+
+            html_report.write_report(report, html_report.from_analysis(
+                started[0], shot_path, options, error=exc))
+        raise
     finally:
         bar.close()
+    page = None
+    if report is not None:  # rendered first: a failure here leaves no file behind
+        from camtraj import report as html_report
+
+        with _stage(analysis.timings, "report"):
+            page = html_report.render_html(html_report.from_analysis(
+                analysis, shot_path, options, warnings=run_warnings(analysis)))
     if output_path is not None:
         with _stage(analysis.timings, "write"):
             write_take(output_path, take_data(analysis), analysis.robot,
                        metadata(analysis, shot_path, options))
+    if report is not None and page is not None:
+        try:
+            html_report.write_html(report, page)
+        except BaseException:
+            if output_path is not None:  # all or nothing
+                Path(output_path).unlink(missing_ok=True)
+            raise
     return summary(analysis, shot_path, output_path, options)
 
 
@@ -238,6 +271,8 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "timing_mode": take.mode,
         "speed_factor": repr(float(take.speed_factor)),
         "servo_rate_hz": repr(float(take.rate)),
+        "max_speed": repr(float(take.report.max_speed)),
+        "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
     }
 
@@ -245,6 +280,22 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
 def _axis_value(name: str, value: float) -> float:
     """SI value for display: degrees for revolute axes, metres otherwise."""
     return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
+
+
+def run_warnings(analysis: Analysis) -> list[str]:
+    """Things a person should know about a finished run that do not stop the take."""
+    take, shot, path = analysis.take, analysis.shot, analysis.path
+    assert take is not None and path is not None
+    relaxed_margin = shot.frames[~path.within_margins].tolist()
+    relaxed_step = shot.frames[~path.within_step].tolist()
+    warnings = list(take.report.warnings)
+    if relaxed_margin:
+        warnings.append(f"{len(relaxed_margin)} frame(s) needed the hard joint limits "
+                        f"(smooth margins relaxed): first {relaxed_margin[0]}")
+    if relaxed_step and take.mode == "shot":
+        warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
+                        f"limit between frames: first {relaxed_step[0]}")
+    return warnings
 
 
 def summary(
@@ -257,15 +308,7 @@ def summary(
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     rep = take.report
-    relaxed_margin = shot.frames[~path.within_margins].tolist()
-    relaxed_step = shot.frames[~path.within_step].tolist()
-    warnings = list(rep.warnings)
-    if relaxed_margin:
-        warnings.append(f"{len(relaxed_margin)} frame(s) needed the hard joint limits "
-                        f"(smooth margins relaxed): first {relaxed_margin[0]}")
-    if relaxed_step and take.mode == "shot":
-        warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
-                        f"limit between frames: first {relaxed_step[0]}")
+    warnings = run_warnings(analysis)
 
     def extents(part: dict[str, Any]) -> dict[str, Any]:
         return {
