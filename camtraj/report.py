@@ -167,15 +167,23 @@ class ReportData:
 # ---------------------------------------------------------------------------------------------
 
 
-def jerk_by_differences(t: Array, qdd: Array) -> Array:
+def jerk_by_differences(t: Array, qdd: Array, shot: tuple[int, int] | None = None) -> Array:
     """Jerk from sampled accelerations, shape (m, 8) from t (m,) and qdd (m, 8).
 
     Central differences (one-sided at the ends): each value is a weighted mean of the mean
-    jerks over the neighbouring steps, so it never overstates the true peak.
+    jerks over the neighbouring steps, so it never overstates the true peak. With ``shot``
+    (the sample indices of the first and the last film frame) no difference spans the
+    switch from the run-up to the shot's path or from it to the run-out; the two frame
+    samples keep the shot's values.
     """
-    if t.shape[0] < 2:
-        return np.zeros_like(qdd)
-    out: Array = np.gradient(qdd, t, axis=0)
+    m = t.shape[0]
+    out: Array = np.zeros_like(qdd)
+    a, b = shot if shot is not None else (0, m - 1)
+    for lo, hi, keep in ((0, a, slice(0, a)), (b, m - 1, slice(b + 1, m)),
+                         (a, b, slice(a, b + 1))):
+        if hi > lo:
+            part = np.gradient(qdd[lo:hi + 1], t[lo:hi + 1], axis=0)
+            out[keep] = part[keep.start - lo: keep.stop - lo]
     return out
 
 
@@ -319,8 +327,9 @@ def from_analysis(
             qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
             tolerance=OPTIMAL_RTOL if take.mode == "optimal" else LIMIT_RTOL,
+            violations=_violations(take.report.exceeded),
         )
-        return _with_violations(data)
+        return data
     empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, 8) for k in ("q", "qd", "qdd",
                                                                             "qddd")}}
     frame_times = shot.times - shot.times[0]
@@ -336,16 +345,19 @@ def from_analysis(
     # The timing failed: show the shot at its own timing, where the check measured it.
     max_speed = error.max_speed if isinstance(error, TimingLimitError) else math.nan
     t, q, qd, qdd, qddd, rate = shot_timing_samples(analysis, options.rate, max_speed)
-    violations = tuple(
-        Violation(v.axis, v.quantity, float(v.ratio), tuple(v.frames), v.describe())
-        for v in getattr(error, "violations", ())
-    )
+    violations = _violations(getattr(error, "violations", []))
     return ReportData(
         **common, status="limits", message=str(error or ""), timing=options.timing,
         speed_factor=1.0, servo_rate_hz=rate, max_speed=max_speed, t=t, q=q, qd=qd,
         qdd=qdd, qddd=qddd, frame_times=frame_times[:n], shot_start=0.0,
         shot_end=float(frame_times[-1]), violations=violations,
     )
+
+
+def _violations(found: Sequence[Any]) -> tuple[Violation, ...]:
+    """The timing stage's own LimitViolations as report records."""
+    return tuple(Violation(v.axis, v.quantity, float(v.ratio), tuple(v.frames), v.describe())
+                 for v in found)
 
 
 def _with_violations(data: ReportData) -> ReportData:
@@ -437,6 +449,8 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
     qdd = take.trajectory_qdd
     mode = md.get("timing_mode", "?")
     poses, pose_frames, track = _tf_poses(take, float(lim["lower"][0]), float(lim["upper"][0]))
+    first, last = np.searchsorted(t, take.frame_times[[0, -1]] - 1e-9).tolist()
+    shot_samples = (int(first), int(last))
     data = ReportData(
         shot=md.get("source_file", "?"), camera=md.get("camera_prim", "?"),
         robot=md.get("robot", "?"), status="ok", message="", timing=mode,
@@ -446,7 +460,7 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         base2world=_base2world(placement), joint_names=names, revolute=revolute,
         lower=lim["lower"], upper=lim["upper"], velocity=lim["max_velocity"],
         acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], t=t, q=q,
-        qd=take.trajectory_qd, qdd=qdd, qddd=jerk_by_differences(t, qdd),
+        qd=take.trajectory_qd, qdd=qdd, qddd=jerk_by_differences(t, qdd, shot_samples),
         frame_numbers=take.frame_numbers, frame_times=take.frame_times,
         shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
@@ -642,9 +656,10 @@ def render_html(data: ReportData) -> str:
     ]
     if data.violations:
         parts.append("<h3>Limits exceeded</h3><ul class='problems'>")
-        parts += [f"<li><a href='#axis-{_e(v.axis)}'>{_e(v.axis)}</a> "
-                  f"<span class='quantity'>{_e(v.quantity)}</span>: {_e(v.text)} "
-                  f"(<span class='frames'>{_e(v.frame_text)}</span>)</li>"
+        parts += [f"<li class='violation' data-axis='{_e(v.axis)}' "
+                  f"data-quantity='{_e(v.quantity)}' data-frames='{_e(v.frame_text)}'>"
+                  f"<a href='#axis-{_e(v.axis)}'>{_e(v.axis)}</a> "
+                  f"{_e(v.text.removeprefix(v.axis).strip())}</li>"
                   for v in data.violations]
         parts.append("</ul>")
     if data.unreachable:

@@ -346,7 +346,7 @@ _RC: Any = {  # matplotlib's rc types list every key as a Literal
     "svg.fonttype": "none",  # text stays text: system fonts, searchable, small
     "font.family": "sans-serif",
     "font.sans-serif": ["DejaVu Sans", "Liberation Sans", "Arial", "Helvetica"],
-    "path.simplify": True,
+    "path.simplify": False,  # every vertex drawn is a real sample (the envelope thins them)
     "axes.spines.top": False,
     "axes.spines.right": False,
 }
