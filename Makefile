@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test lint typecheck unit bench clean samples
+.PHONY: all demo test lint typecheck unit bench clean samples chromium
 
 all: demo
 
@@ -30,8 +30,14 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy camtraj
 
-unit: $(STAMP)
+unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
 	$(BIN)/pytest
+
+# Headless Chromium renders the HTML report in the tests (they skip, saying so, without it).
+# Idempotent: installs the Debian package only when no chromium is on the PATH. `make test`
+# runs it when CI=true.
+chromium:
+	@command -v chromium >/dev/null || (apt-get update && apt-get install -y --no-install-recommends chromium)
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py
