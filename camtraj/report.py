@@ -539,7 +539,9 @@ td.warn { background: #fff3d6; } td.over { background: #fde2e1; color: #9c1c1a;
   font-weight: 600; }
 ul.problems li { color: #9c1c1a; } ul.warnings li { color: #7a5200; }
 nav a { margin-right: 0.8rem; } nav a.bad { color: #c62828; font-weight: 600; }
-figure { margin: 0.4rem 0 1rem; } svg { width: 100%; height: auto; display: block; }
+figure { margin: 0.4rem 0 1.2rem; } figcaption { font-size: 0.85rem; margin-left: 4%; }
+.key { margin-right: 1.1rem; white-space: nowrap; }
+svg { width: 100%; height: auto; display: block; }
 footer { margin-top: 2rem; font-size: 0.8rem; color: #777; }
 """
 
@@ -633,7 +635,7 @@ def _margins_table(data: ReportData) -> str:
 
 def render_html(data: ReportData) -> str:
     """The whole report as one self-contained HTML page (no scripts, nothing fetched)."""
-    from camtraj.report_plots import figures
+    from camtraj.report_plots import COLORS, figures, limit_text
 
     path_fig, axis_figs = figures(data)
     title = Path(data.shot).name
@@ -686,8 +688,12 @@ def render_html(data: ReportData) -> str:
                   "<p>Each quantity as a fraction of its limit (±1: the limit lines). Shaded: "
                   "the shot, from the first to the last film frame; ticks at the bottom: film "
                   "frames; red: over a limit, with its frames.</p>", f"<nav>{nav}</nav>"]
-        for name, svg in zip(data.joint_names, axis_figs, strict=True):
-            parts.append(f"<figure id='axis-{_e(name)}' class='axis'>{svg}</figure>")
+        for i, (name, svg) in enumerate(zip(data.joint_names, axis_figs, strict=True)):
+            key = " ".join(
+                f"<span class='key'><span style='color:{COLORS[q]}'>&#9644;</span> {q} "
+                f"{_e(limit_text(data, i, q))}</span>" for q in QUANTITIES)
+            parts.append(f"<figure id='axis-{_e(name)}' class='axis'>{svg}"
+                         f"<figcaption>{_e(name)}, ±1 is: {key}</figcaption></figure>")
         parts.append("</section>")
     parts.append(f"<footer>camtraj {_e(camtraj.__version__)} report from {_e(data.source)}"
                  "</footer></body></html>")

@@ -47,7 +47,7 @@ _BLUE = "#1f5fa8"
 _RED = "#d62728"
 _SHOT = "#e6eef8"
 _GREY = "#8a8a8a"
-_COLORS = {"position": "#404040", "velocity": "#1f5fa8", "acceleration": "#e08a00",
+COLORS = {"position": "#404040", "velocity": "#1f5fa8", "acceleration": "#e08a00",
            "jerk": "#8e44ad"}
 #: The y scale of the axis plots stops here [x limit], so a large violation leaves the rest
 #: readable.
@@ -143,62 +143,34 @@ def figures(data: ReportData) -> tuple[str, list[str]]:
 
     with matplotlib.rc_context(_RC):
         path = path_svg(data) if data.camera_path.shape[0] else ""
-        axes = [axis_svg(data, i) for i in range(len(data.joint_names))] if data.t.size else []
+        axes = axis_svgs(data) if data.t.size else []
     return path, axes
 
 
-def axis_svg(data: ReportData, axis: int) -> str:
-    """One axis's position, velocity, acceleration and jerk / limit over take time, as SVG.
+def axis_svgs(data: ReportData) -> list[str]:
+    """Per axis: position, velocity, acceleration and jerk / limit over take time, as SVG.
 
     All four share the y scale (±1: the limits). The scale stops at ``Y_MAX`` (or the
     highest peak, if lower), so a violation many times a limit does not flatten the rest:
     its curve runs off the top in red, and its label gives the peak as a multiple of the limit.
+
+    The axes share the time axis, the shading and the frame ticks, so one figure is drawn
+    once and reused: each axis's curves, limit lines and spans are added, the figure is
+    saved, and they are removed again (matplotlib then keeps its tick objects).
     """
     from matplotlib.figure import Figure
     from matplotlib.ticker import FuncFormatter, MaxNLocator
 
-    name = data.joint_names[axis]
     fig = Figure(figsize=(_WIDTH_IN, 2.9), dpi=_DPI)
-    fig.subplots_adjust(left=0.055, right=0.865, top=0.86, bottom=0.2)
+    fig.subplots_adjust(left=0.055, right=0.985, top=0.86, bottom=0.2)
     ax = fig.add_subplot()
-    ax.patch.set_gid(f"{name}-axes")
     ax.axvspan(data.shot_start, data.shot_end, color=_SHOT, zorder=0, lw=0)
     ticks = data.frame_times[:: frame_tick_stride(data.frame_numbers.shape[0])]
     tick_x = np.repeat(ticks, 3)  # one path for every tick: (x, 0) (x, h) (gap) ...
     tick_y = np.tile([0.0, 0.05, np.nan], ticks.shape[0])
-    ax.plot(tick_x, tick_y, transform=ax.get_xaxis_transform(), color="#4a4a4a", lw=0.6,
-            gid=f"{name}-frames", zorder=5)
-    violated = {v.quantity: v for v in data.violations if v.axis == name}
-    peak = 1.0
-    for quantity in QUANTITIES:
-        y = _fraction(data, axis, quantity)
-        peak = max(peak, float(np.max(np.abs(y))) if y.size else 0.0)
-        te, ye = envelope(data.t, y)
-        ax.plot(te, ye, color=_COLORS[quantity], lw=1.0, gid=f"{name}-{quantity}-curve",
-                zorder=3, label=_legend(data, axis, quantity))
-        over = np.where(np.abs(ye) > 1.0 + data.tolerance, ye, np.nan)
-        if np.any(np.isfinite(over)):
-            ax.plot(te, over, color=_RED, lw=2.0, zorder=4)
-    top = min(peak * 1.06, Y_MAX) if peak > 1.0 else 1.12
-    ax.set_ylim(-top, top)
+    (frame_ticks,) = ax.plot(tick_x, tick_y, transform=ax.get_xaxis_transform(),
+                             color="#4a4a4a", lw=0.6, zorder=5)
     ax.set_xlim(float(data.t[0]), float(data.t[-1]))
-    bad = bool(violated)
-    for sign, side in ((1.0, "upper"), (-1.0, "lower")):
-        ax.axhline(sign, color=_RED if bad else _GREY, lw=1.0 if bad else 0.8,
-                   ls="-" if bad else "--", zorder=2, gid=f"{name}-limit-{side}")
-    for row, (quantity, v) in enumerate(violated.items()):
-        for a, b in v.frames:
-            ta, tb = _span(data, a, b)
-            ax.axvspan(ta, tb, color=_RED, alpha=0.15, lw=0, zorder=1,
-                       gid=f"{name}-{quantity}-violation-{a}-{b}")
-            label = f"frames {a}-{b}" if b != a else f"frame {a}"
-            ax.text(0.5 * (ta + tb), 0.96 - 0.11 * row,
-                    f"{quantity} {v.ratio:.3g}{TIMES} limit, {label}",
-                    transform=ax.get_xaxis_transform(), ha="center", va="top", color=_RED,
-                    fontsize=8, fontweight="bold", zorder=6,
-                    bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 0.8})
-    ax.text(0.0, 1.04, f"{name}  ({'revolute' if data.revolute[axis] else 'prismatic'})",
-            transform=ax.transAxes, fontsize=10, fontweight="bold", gid=f"{name}-title")
     ax.set_ylabel(f"{TIMES} limit", fontsize=9)
     ax.set_xlabel("take time [s] / film frame   (shaded: the shot; ticks: film frames)",
                   fontsize=8)
@@ -209,15 +181,61 @@ def axis_svg(data: ReportData, axis: int) -> str:
 
     def tick(x: float, _pos: int) -> str:
         f = float(to_frame(x))
-        frame = f"\n{round(f)}" if first - 0.5 <= f <= last + 0.5 else "\n"
+        frame = f"\n{round(f)}" if first - 0.01 <= f <= last + 0.01 else "\n"
         return f"{x:g}{frame}"
 
     ax.xaxis.set_major_formatter(FuncFormatter(tick))
     ax.tick_params(labelsize=8)
     ax.grid(True, axis="y", color="#e6e6e6", lw=0.6)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False,
-              borderaxespad=0.0, handlelength=1.5)
-    return _svg(fig, salt=f"camtraj-axis-{name}")
+    out = []
+    for axis, name in enumerate(data.joint_names):
+        ax.patch.set_gid(f"{name}-axes")
+        frame_ticks.set_gid(f"{name}-frames")
+        added = _draw_axis(ax, data, axis)
+        out.append(_svg(fig, salt=f"camtraj-axis-{name}"))
+        for artist in added:
+            artist.remove()
+    return out
+
+
+def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
+    """One axis's curves, limit lines, violation spans and title; returns what it added."""
+    name = data.joint_names[axis]
+    added: list[Any] = []
+    violated = {v.quantity: v for v in data.violations if v.axis == name}
+    peak = 1.0
+    for quantity in QUANTITIES:
+        y = _fraction(data, axis, quantity)
+        peak = max(peak, float(np.max(np.abs(y))) if y.size else 0.0)
+        te, ye = envelope(data.t, y)
+        added += ax.plot(te, ye, color=COLORS[quantity], lw=1.0, zorder=3,
+                         gid=f"{name}-{quantity}-curve")
+        over = np.where(np.abs(ye) > 1.0 + data.tolerance, ye, np.nan)
+        if np.any(np.isfinite(over)):
+            added += ax.plot(te, over, color=_RED, lw=2.0, zorder=4)
+    top = min(peak * 1.06, Y_MAX) if peak > 1.0 else 1.12
+    ax.set_ylim(-top, top)
+    bad = bool(violated)
+    for sign, side in ((1.0, "upper"), (-1.0, "lower")):
+        added.append(ax.axhline(sign, color=_RED if bad else _GREY, lw=1.0 if bad else 0.8,
+                                ls="-" if bad else "--", zorder=2,
+                                gid=f"{name}-limit-{side}"))
+    for row, (quantity, v) in enumerate(violated.items()):
+        for a, b in v.frames:
+            ta, tb = _span(data, a, b)
+            added.append(ax.axvspan(ta, tb, color=_RED, alpha=0.15, lw=0, zorder=1,
+                                    gid=f"{name}-{quantity}-violation-{a}-{b}"))
+            label = f"frames {a}-{b}" if b != a else f"frame {a}"
+            added.append(ax.text(
+                0.5 * (ta + tb), 0.96 - 0.11 * row,
+                f"{quantity} {v.ratio:.3g}{TIMES} limit, {label}",
+                transform=ax.get_xaxis_transform(), ha="center", va="top", color=_RED,
+                fontsize=8, fontweight="bold", zorder=6,
+                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 0.8}))
+    added.append(ax.text(
+        0.0, 1.04, f"{name}  ({'revolute' if data.revolute[axis] else 'prismatic'})",
+        transform=ax.transAxes, fontsize=10, fontweight="bold", gid=f"{name}-title"))
+    return added
 
 
 def _span(data: ReportData, a: int, b: int) -> tuple[float, float]:
@@ -228,12 +246,13 @@ def _span(data: ReportData, a: int, b: int) -> tuple[float, float]:
     return (ta - half, tb + half) if tb - ta < 2 * half else (ta, tb)
 
 
-def _legend(data: ReportData, axis: int, quantity: str) -> str:
+def limit_text(data: ReportData, axis: int, quantity: str) -> str:
+    """What ±1 means for one quantity of one axis, e.g. ``±500 deg/s²``."""
     unit, factor = _unit(data, axis, quantity)
     if quantity == "position":
         lo, hi = data.lower[axis] * factor, data.upper[axis] * factor
-        return f"position\n[{lo:.4g}, {hi:.4g}] {unit}"
-    return f"{quantity}\n±{data.limit(quantity)[axis] * factor:.4g} {unit}"
+        return f"{lo:.4g} to {hi:.4g} {unit}"
+    return f"±{data.limit(quantity)[axis] * factor:.4g} {unit}"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -291,7 +310,8 @@ def path_svg(data: ReportData) -> str:
                     fontsize=8, color="#606060", ha="right")
         _frame_arrows(ax, np.eye(4), k, "robot base", "#202020")
         if not np.allclose(data.base2world, np.eye(4)):
-            _frame_arrows(ax, np.linalg.inv(data.base2world), k, "stage origin", "#7a4ea3")
+            _frame_arrows(ax, np.linalg.inv(data.base2world), k, "stage origin", "#7a4ea3",
+                          dy=8)
         for j, pose in enumerate(data.poses):
             ax.plot(pose[:, 0], pose[:, k], "-o", color="#3b3b4f", lw=1.4, ms=2.2, zorder=2,
                     alpha=0.45 + 0.4 * j / max(1, len(data.poses) - 1),
@@ -326,7 +346,8 @@ def path_svg(data: ReportData) -> str:
     return _svg(fig, salt="camtraj-path")
 
 
-def _frame_arrows(ax: Any, T: NDArray[np.floating[Any]], k: int, label: str, color: str) -> None:
+def _frame_arrows(ax: Any, T: NDArray[np.floating[Any]], k: int, label: str, color: str,
+                  dy: float = -12) -> None:
     """A frame's x and (k-th) axis as 0.5 m arrows at its origin, in view coordinates."""
     o = T[:3, 3]
     for axis, col in ((0, _RED), (k, "#2ca02c" if k == 1 else "#1f77b4")):
@@ -334,7 +355,7 @@ def _frame_arrows(ax: Any, T: NDArray[np.floating[Any]], k: int, label: str, col
         ax.annotate("", (o[0] + d[0], o[k] + d[k]), (o[0], o[k]),
                     arrowprops={"arrowstyle": "->", "color": col, "lw": 1.4})
     ax.plot(o[0], o[k], "o", color=color, ms=4, zorder=5)
-    ax.annotate(label, (o[0], o[k]), xytext=(4, -12), textcoords="offset points", fontsize=8,
+    ax.annotate(label, (o[0], o[k]), xytext=(4, dy), textcoords="offset points", fontsize=8,
                 color=color)
 
 

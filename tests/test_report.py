@@ -163,8 +163,11 @@ def test_page_has_the_summary_and_every_plot(runs: Runs, name: str) -> None:
         root = axis_svg(page, axis)
         texts = " ".join(t.text or "" for t in root.iter(f"{SVG_NS}text"))
         assert f"{axis}  ({kind})" in texts
+        caption = re.search(rf"<figure id='axis-{axis}'.*?<figcaption>(.*?)</figcaption>",
+                            page, flags=re.DOTALL)
+        assert caption is not None
         for quantity in rp.QUANTITIES:
-            assert quantity in texts
+            assert quantity in caption.group(1)
             by_id(root, f"{axis}-{quantity}-curve")
     assert "top view" in page and "side view" in page
     for fact in ("shot", "robot", "placement", "timing mode", "speed factor",
