@@ -12,6 +12,7 @@ comes with a ratio against a baseline measured in the same run:
    (``bench/ik_baselines.py``).
 3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage.
 4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
+5. What ``--report`` adds to the convert of the one-minute shot (``bench/bench_report.py``).
 
 Usage: ``python bench/run.py [--quick] [--json PATH]``. The full run takes a few minutes on two
 cores; ``--quick`` uses a shorter shot, fewer poses and one repeat.
@@ -602,6 +603,11 @@ def main(argv: list[str] | None = None) -> int:
         results["convert"] = conv
         bare_ik = seq["smooth"]["median_wall_s"] * targets.shape[0] / seq_targets.shape[0]
         print_convert(conv, targets.shape[0] / FPS, bare_ik)
+
+        from bench_report import bench_report, print_report
+
+        results["report"] = bench_report(shot, work)
+        print_report(results["report"])
 
     est_shot = 240.0 / seq["smooth"]["fps"] + 0.5
     batch = bench_batch(quick, est_shot)
