@@ -11,7 +11,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MIN_PY := 3.11
 
-.PHONY: all demo test lint typecheck unit bench clean samples check-python
+.PHONY: all demo test lint typecheck unit bench clean samples check-python chromium
 
 all: demo
 
@@ -62,8 +62,14 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy camtraj
 
-unit: $(STAMP)
+unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
 	$(BIN)/pytest $(ARGS)
+
+# Headless Chromium renders the HTML report in the tests (they skip, saying so, without it).
+# Idempotent: installs the Debian package only when no chromium is on the PATH. `make test`
+# runs it when CI=true.
+chromium:
+	@command -v chromium >/dev/null || (apt-get update && apt-get install -y --no-install-recommends chromium)
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py $(ARGS)

@@ -19,6 +19,7 @@ comes with a ratio against a baseline measured in the same run:
    ``--smooth-rev`` (exported to a temporary folder and run in a subprocess).
 6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
    (``bench/bench_place.py``).
+7. What ``--report`` adds to the convert of the one-minute shot (``bench/bench_report.py``).
 
 numpy, not numba: a numba version of the closed form measured 5x numpy on the old per-frame call
 mix but only 2.4x at >= 256 candidates per call, and costs ~11 s of JIT compilation per process;
@@ -803,6 +804,11 @@ def main(argv: list[str] | None = None) -> int:
         speeds = bench_speeds(robot, args.smooth_rev, work)
         results["speeds"] = speeds
         print_speeds(speeds)
+
+        from bench_report import bench_report, print_report
+
+        results["report"] = bench_report(shot, work)
+        print_report(results["report"])
 
     est_shot = 240.0 / seq["shot"]["fps"] + 0.5
     batch = bench_batch(quick, est_shot)

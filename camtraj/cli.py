@@ -186,9 +186,11 @@ def main() -> None:
 @click.option("--foxglove-layout", "layout", type=click.Path(dir_okay=False),
               metavar="FILE.json", help="Also write a Foxglove layout for the MCAP (3-D robot "
               "and frustum, axis plots, shot frames).")
+@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+              help="Also write the HTML report (plots of every axis, top and side views).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
 def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
-            layout: str | None, quiet: bool, **kw: Any) -> None:
+            layout: str | None, report: str | None, quiet: bool, **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
 
     Every frame is solved for the robot (SM inverse kinematics), the move is timed at the
@@ -204,7 +206,7 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
 
     try:
         result = run(shot, output, _options(kw), progress=progress, summary_path=summary,
-                     rig_layer=rig_layer, foxglove_layout=layout)
+                     rig_layer=rig_layer, foxglove_layout=layout, report=report)
     except CamtrajError as exc:
         progress.close()
         _fail(exc)
@@ -212,7 +214,7 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
         progress.close()
     if not quiet:
         click.echo(_report(result))
-        for extra in (rig_layer, layout):
+        for extra in (rig_layer, layout, report):
             if extra is not None:
                 click.echo(f"  wrote {extra}")
 
@@ -222,8 +224,11 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
 @convert_options
 @more_convert_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+              help="Also write the HTML report; for a shot that cannot be done it shows "
+              "where and why.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
+def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) -> None:
     """Check whether the robot can do SHOT as asked, writing nothing.
 
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
@@ -237,7 +242,7 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
     options = None
     try:
         options = _options(kw)
-        result = run(shot, None, options, progress=progress)
+        result = run(shot, None, options, progress=progress, report=report)
     except UnreachableFramesError as exc:
         result = _unreachable_report(shot, exc)
     except TimingLimitError as exc:
@@ -289,6 +294,21 @@ def info(mcap_file: str, as_json: bool) -> None:
               for t in d["topics"]]
     lines += _limits_used(d)
     click.echo("\n".join(lines))
+
+
+@main.command("report")
+@click.argument("mcap_file", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              metavar="REPORT.html", help="The HTML file to write (atomically).")
+def report_command(mcap_file: str, output: str) -> None:
+    """Write the HTML report of a converted take (MCAP_FILE): one self-contained page with
+    the summary, every axis's use of its limits over take time, and top and side views."""
+    from camtraj.report import report_from_mcap, write_report
+
+    try:
+        write_report(output, report_from_mcap(mcap_file), source=mcap_file)
+    except CamtrajError as exc:
+        _fail(exc)
 
 
 main.add_command(batch_command, "batch")

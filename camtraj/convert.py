@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
-from camtraj.errors import InputError, ShotFileError
+from camtraj.errors import InfeasibleError, InputError, ShotFileError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.inputs import require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
@@ -131,6 +131,7 @@ def analyse(
     options: ConvertOptions,
     *,
     progress: Progress | None = None,
+    on_start: Callable[[Analysis], None] | None = None,
 ) -> Analysis:
     """Read, place, solve and time a shot. Raises the stage's typed error on failure.
 
@@ -138,6 +139,8 @@ def analyse(
         shot_path: The USD shot.
         options: What to do.
         progress: Told of each stage (``read``, ``solve`` frame by frame, ``time``).
+        on_start: Called once with the analysis before the IK starts; it is filled in as the
+            stages finish, so after a failure it holds what was computed (for a report).
     """
     progress = progress or Silent()
     timings: dict[str, float] = {}
@@ -160,6 +163,8 @@ def analyse(
             raise InputError(msg)
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
+    if on_start is not None:
+        on_start(analysis)
     progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
@@ -196,17 +201,20 @@ def convert(
     summary_extra: Mapping[str, Any] | None = None,
     rig_layer: str | Path | None = None,
     foxglove_layout: str | Path | None = None,
+    report: str | Path | None = None,
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
-    With ``output_path`` None nothing is written (``camtraj check``). Every other output is
+    With ``output_path`` None no MCAP is written (``camtraj check``). Every other output is
     written with it as one result (all replaced or none): ``summary_path`` the summary (plus
     ``summary_extra``) as JSON, ``rig_layer`` the USD rig layer (:mod:`camtraj.usd_rig`),
-    ``foxglove_layout`` a Foxglove layout for the MCAP. Every output path is checked before
-    the solve (its folder, that it is a regular file or nothing, that it is no input and not
-    another output). Raises ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the
-    frames, axes and margins named; a failed or interrupted run writes nothing and leaves
-    existing outputs untouched. ``progress`` is told of each stage (see
+    ``foxglove_layout`` a Foxglove layout for the MCAP, ``report`` the HTML report
+    (:mod:`camtraj.report`). Every output path is checked before the solve (its folder, that
+    it is a regular file or nothing, that it is no input and not another output). Raises
+    ``InputError`` (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins
+    named; a failed or interrupted run writes nothing and leaves existing outputs untouched,
+    except that a report asked for alone (``check --report``) is written for a shot that
+    cannot be done, showing why. ``progress`` is told of each stage (see
     :mod:`camtraj.progress`; the CLI shows it on a terminal).
     """
     options = options or ConvertOptions()
@@ -217,13 +225,25 @@ def convert(
         check_rig_path(rig_layer)
     with OutputSet() as outputs:
         for path, label in ((output_path, "-o"), (summary_path, "--summary"),
-                            (rig_layer, "--usd"), (foxglove_layout, "--foxglove-layout")):
+                            (rig_layer, "--usd"), (foxglove_layout, "--foxglove-layout"),
+                            (report, "--report")):
             if path is not None:
                 outputs.add(path, label)
         if outputs.paths:
             require_regular_files(shot_path, options)
             outputs.refuse_inputs(run_inputs(shot_path, options))
-        analysis = analyse(shot_path, options, progress=progress)
+        started: list[Analysis] = []
+        try:
+            analysis = analyse(shot_path, options, progress=progress, on_start=started.append)
+        except InfeasibleError as exc:
+            if report is not None and started and len(outputs.paths) == 1:
+                from camtraj import report as html_report
+
+                page = html_report.render_html(html_report.from_analysis(
+                    started[0], shot_path, options, error=exc))
+                outputs.write_bytes(report, page.encode("utf-8"))
+                outputs.commit()
+            raise
         if output_path is not None:
             progress.stage("write")
             with _stage(analysis.timings, "write"), outputs.open(output_path) as stream:
@@ -237,6 +257,14 @@ def convert(
             from camtraj.ros2 import foxglove_layout as layout
 
             outputs.write_bytes(foxglove_layout, layout().encode("utf-8"))
+        if report is not None:
+            from camtraj import report as html_report
+
+            progress.stage("report")
+            with _stage(analysis.timings, "report"):
+                page = html_report.render_html(html_report.from_analysis(
+                    analysis, shot_path, options, warnings=run_warnings(analysis)))
+            outputs.write_bytes(report, page.encode("utf-8"))
         result = summary(analysis, shot_path, output_path, options)
         if summary_path is not None:
             text = jsonsafe.dumps({**result, **(summary_extra or {})}) + "\n"
@@ -287,6 +315,8 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "timing_mode": take.mode,
         "speed_factor": repr(float(take.speed_factor)),
         "servo_rate_hz": repr(float(take.rate)),
+        "max_speed": repr(float(take.report.max_speed)),
+        "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
         # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
         "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
@@ -299,6 +329,18 @@ def _axis_value(name: str, value: float) -> float:
     return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
 
 
+def run_warnings(analysis: Analysis) -> list[str]:
+    """Things a person should know about a finished run that do not stop the take."""
+    take, shot, path = analysis.take, analysis.shot, analysis.path
+    assert take is not None and path is not None
+    relaxed_step = shot.frames[~path.within_step].tolist()
+    warnings = [*shot.warnings, *take.report.warnings]
+    if relaxed_step and take.mode == "shot":
+        warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
+                        f"limit between frames: first {relaxed_step[0]}")
+    return warnings
+
+
 def summary(
     analysis: Analysis,
     shot_path: str | Path,
@@ -309,11 +351,7 @@ def summary(
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     rep = take.report
-    relaxed_step = shot.frames[~path.within_step].tolist()
-    warnings = [*shot.warnings, *rep.warnings]
-    if relaxed_step and take.mode == "shot":
-        warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
-                        f"limit between frames: first {relaxed_step[0]}")
+    warnings = run_warnings(analysis)
 
     def extents(part: dict[str, Any]) -> dict[str, Any]:
         return {

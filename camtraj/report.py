@@ -1,0 +1,720 @@
+"""The HTML report: one self-contained page a crew looks at before the shoot day.
+
+One plain data object, :class:`ReportData`, is built from either source and rendered by one
+function, :func:`render_html`:
+
+- :func:`from_analysis`: the in-memory run of ``camtraj convert --report`` / ``check --report``,
+  including a shot that fails (its own timing's samples with the violations, or the camera
+  path with the frames the robot cannot reach);
+- :func:`from_take`: a camtraj MCAP read back (``camtraj report OUT.mcap``): servo samples from
+  /joint_trajectory (jerk by differences of the accelerations), frames from /shot/frames,
+  limits from the ``camtraj.robot`` metadata, link origins from /tf.
+
+The page holds no script and fetches nothing: inline CSS with system fonts, inline SVG figures
+(:mod:`camtraj.report_plots`). :func:`write_report` writes it atomically.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+import camtraj
+from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError, frame_ranges
+
+if TYPE_CHECKING:
+    from camtraj.convert import Analysis
+    from camtraj.mcap_io import ReadTake
+    from camtraj.options import ConvertOptions
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
+#: Above 1 + this fraction of a limit a sample counts as over it (float round-off only).
+LIMIT_RTOL = 1e-9
+#: The same for an "optimal" take: toppra is discretised (timing.OPTIMAL_SLACK).
+OPTIMAL_RTOL = 1e-3
+#: The same for a take read back from MCAP: its jerk is by differences of the recorded
+#: accelerations, which sit on the jerk limit to ~1e-8 in the run-up and run-out.
+MCAP_RTOL = 1e-6
+#: Robot poses drawn as stick figures in the path views.
+N_POSES = 5
+TIMES = "\u00d7"  # the multiplication sign
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One axis over one limit on runs of film frames (inclusive), e.g. pan acceleration."""
+
+    axis: str
+    quantity: str
+    ratio: float  # peak / limit (position: the position use, 1 at a bound)
+    frames: tuple[tuple[int, int], ...]
+    text: str
+
+    @property
+    def frame_text(self) -> str:
+        return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in self.frames)
+
+
+def _empty(*shape: int) -> Array:
+    return np.zeros(shape)
+
+
+@dataclass(frozen=True, eq=False)
+class ReportData:
+    """Everything the report shows, in SI units and the robot base frame.
+
+    Attributes:
+        shot: The shot file. camera: Its camera prim. robot: Robot name and source.
+        status: ``"ok"``, ``"limits"`` (the shot's timing exceeds a limit) or
+            ``"unreachable"`` (frames the robot cannot reach). message: Why not (one line).
+        timing: Timing mode. speed_factor: Take duration of the shot / its own duration.
+        servo_rate_hz: Servo rate. fps: Film frame rate.
+        max_speed: Maximum feasible speed as a fraction of real time (nan: not known).
+        placement: How the base was placed (text). base2world: The placement, (4, 4).
+        joint_names: Axis names (8,). revolute: Whether each axis is revolute, (8,).
+        lower, upper, velocity, acceleration, jerk: The robot's limits, (8,) each.
+        t: Servo sample times [s], (m,); empty without a joint path.
+        q, qd, qdd, qddd: Position, velocity, acceleration, jerk per sample, (m, 8).
+        frame_numbers: Film frame numbers, (n,). frame_times: Their take times [s], (n,).
+        shot_start, shot_end: Take time of the first and the last film frame [s].
+        camera_path: Requested camera position per frame [m], (n, 3).
+        camera_look: Its viewing direction (unit), (n, 3).
+        poses: Link origins of a few robot poses [m], (k, p, 3), base first, camera last.
+        pose_frames: The film frame of each pose, (k,).
+        track: The track's two ends (its min and max travel) [m], (2, 3).
+        violations: Every limit the samples exceed, worst first.
+        unreachable: Film frames the robot cannot reach.
+        warnings: Things a person should know that do not stop the take.
+        tolerance: Fraction above a limit that counts as over it.
+        source: Where the data came from (the MCAP file, or "convert"/"check").
+    """
+
+    shot: str
+    camera: str
+    robot: str
+    status: str
+    message: str
+    timing: str
+    speed_factor: float
+    servo_rate_hz: float
+    fps: float
+    max_speed: float
+    placement: str
+    base2world: Array
+    joint_names: tuple[str, ...]
+    revolute: NDArray[np.bool_]
+    lower: Array
+    upper: Array
+    velocity: Array
+    acceleration: Array
+    jerk: Array
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+    qddd: Array
+    frame_numbers: IntArray
+    frame_times: Array
+    shot_start: float
+    shot_end: float
+    camera_path: Array
+    camera_look: Array
+    poses: Array
+    pose_frames: IntArray
+    track: Array
+    violations: tuple[Violation, ...] = ()
+    unreachable: tuple[int, ...] = ()
+    warnings: tuple[str, ...] = ()
+    tolerance: float = LIMIT_RTOL
+    source: str = "convert"
+
+    def limit(self, quantity: str) -> Array:
+        """The symmetric limit of velocity, acceleration or jerk, shape (8,)."""
+        return {"velocity": self.velocity, "acceleration": self.acceleration,
+                "jerk": self.jerk}[quantity]
+
+    def violation_frames(self) -> list[int]:
+        """Every film frame inside a violation's frame runs."""
+        out: set[int] = set()
+        for v in self.violations:
+            for a, b in v.frames:
+                out.update(range(a, b + 1))
+        return sorted(out)
+
+    def shot_mask(self) -> NDArray[np.bool_]:
+        """The servo samples of the shot part (first to last film frame)."""
+        eps = 1e-9
+        mask: NDArray[np.bool_] = (self.t >= self.shot_start - eps) & (
+            self.t <= self.shot_end + eps)
+        return mask
+
+
+# ---------------------------------------------------------------------------------------------
+# Shared pieces of the two builders
+# ---------------------------------------------------------------------------------------------
+
+
+def jerk_by_differences(t: Array, qdd: Array, shot: tuple[int, int] | None = None) -> Array:
+    """Jerk from sampled accelerations, shape (m, 8) from t (m,) and qdd (m, 8).
+
+    Central differences (one-sided at the ends): each value is a weighted mean of the mean
+    jerks over the neighbouring steps, so it never overstates the true peak. With ``shot``
+    (the sample indices of the first and the last film frame) no difference spans the
+    switch from the run-up to the shot's path or from it to the run-out; the two frame
+    samples keep the shot's values.
+    """
+    m = t.shape[0]
+    out: Array = np.zeros_like(qdd)
+    a, b = shot if shot is not None else (0, m - 1)
+    for lo, hi, keep in ((0, a, slice(0, a)), (b, m - 1, slice(b + 1, m)),
+                         (a, b, slice(a, b + 1))):
+        if hi > lo:
+            part = np.gradient(qdd[lo:hi + 1], t[lo:hi + 1], axis=0)
+            out[keep] = part[keep.start - lo: keep.stop - lo]
+    return out
+
+
+def fractions(q: Array, qd: Array, qdd: Array, qddd: Array, lower: Array, upper: Array,
+              limits: Sequence[Array]) -> dict[str, Array]:
+    """Each quantity as a fraction of its limit, (m, 8): ±1 at the limits.
+
+    Position: ``(q - mid) / half_range`` (the timing report's position use, signed).
+    """
+    mid, half = 0.5 * (upper + lower), 0.5 * (upper - lower)
+    return {
+        "position": (q - mid) / half,
+        "velocity": qd / limits[0],
+        "acceleration": qdd / limits[1],
+        "jerk": qddd / limits[2],
+    }
+
+
+def violations_from_samples(data: ReportData) -> tuple[Violation, ...]:
+    """Every (axis, quantity) whose samples exceed the limit, worst first.
+
+    A sample between two film frames counts for both (as in the timing report); run-up
+    samples count for the first frame, run-out samples for the last.
+    """
+    if not data.t.size:
+        return ()
+    fr = fractions(data.q, data.qd, data.qdd, data.qddd, data.lower, data.upper,
+                   (data.velocity, data.acceleration, data.jerk))
+    ft, fn = data.frame_times, data.frame_numbers
+    hi_idx = np.clip(np.searchsorted(ft, data.t - 1e-9, side="left"), 0, fn.size - 1)
+    lo_idx = np.clip(np.searchsorted(ft, data.t + 1e-9, side="right") - 1, 0, fn.size - 1)
+    out: list[Violation] = []
+    for quantity in QUANTITIES:
+        use = np.abs(fr[quantity])
+        for i, name in enumerate(data.joint_names):
+            over = use[:, i] > 1.0 + data.tolerance
+            if not np.any(over):
+                continue
+            idx = sorted(set(lo_idx[over].tolist()) | set(hi_idx[over].tolist()))
+            frames = _runs([int(fn[j]) for j in idx], [int(j) for j in idx])
+            ratio = float(use[:, i].max())
+            text = f"{name} {quantity} {ratio:.3g}{TIMES} its limit on " + _frames_text(frames)
+            out.append(Violation(name, quantity, ratio, frames, text))
+    out.sort(key=lambda v: -v.ratio)
+    return tuple(out)
+
+
+def _runs(numbers: list[int], indices: list[int]) -> tuple[tuple[int, int], ...]:
+    """Runs of consecutive frame indices as (first, last) frame numbers."""
+    runs: list[tuple[int, int]] = []
+    prev = -2
+    for num, idx in zip(numbers, indices, strict=True):
+        if runs and idx == prev + 1:
+            runs[-1] = (runs[-1][0], num)
+        else:
+            runs.append((num, num))
+        prev = idx
+    return tuple(runs)
+
+
+def _frames_text(frames: tuple[tuple[int, int], ...]) -> str:
+    return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in frames)
+
+
+def track_ends(link2base: Array, q_track: float, lower: float, upper: float) -> Array:
+    """The track's ends in the base frame, (2, 3), from one pose's link frames (p, 4, 4).
+
+    Frame 1 (the carriage) slides along frame 0's z axis by the track value.
+    """
+    carriage, direction = link2base[1, :3, 3], link2base[0, :3, 2]
+    return np.stack([carriage + (lim - q_track) * direction for lim in (lower, upper)])
+
+
+def pose_indices(n: int, k: int = N_POSES) -> IntArray:
+    """Up to k frame indices spread over n frames, first and last included."""
+    out: IntArray = np.unique(np.round(np.linspace(0, n - 1, min(n, k))).astype(np.int64))
+    return out
+
+
+def _placement_text(desc: dict[str, Any]) -> str:
+    x, y, z = desc.get("translation_m", (0.0, 0.0, 0.0))
+    return (f"x {x:.3f} m, y {y:.3f} m, z {z:.3f} m, yaw {desc.get('yaw_deg', 0.0):.2f} deg "
+            f"({desc.get('source', '?')})")
+
+
+def _base2world(desc: dict[str, Any]) -> Array:
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(desc.get("rotation", np.eye(3)), dtype=float)
+    T[:3, 3] = np.asarray(desc.get("translation_m", (0.0, 0.0, 0.0)), dtype=float)
+    return T
+
+
+# ---------------------------------------------------------------------------------------------
+# Builder 1: the in-memory analysis of convert / check
+# ---------------------------------------------------------------------------------------------
+
+
+def from_analysis(
+    analysis: Analysis,
+    shot_path: str | Path,
+    options: ConvertOptions,
+    *,
+    warnings: Sequence[str] = (),
+    error: InfeasibleError | None = None,
+) -> ReportData:
+    """The report of a run: a finished take, or a shot that failed with ``error``.
+
+    Args:
+        analysis: What the run computed (``take`` None when the timing failed, ``path``
+            None too when frames are unreachable).
+        shot_path: The shot file as given.
+        options: The run's options (timing mode, servo rate).
+        warnings: The run's warnings (convert.summary's).
+        error: The failure, when the shot cannot be done as asked.
+    """
+    from camtraj.timing import Limits, TimingLimitError
+
+    shot, robot, take, path = analysis.shot, analysis.robot, analysis.take, analysis.path
+    limits = Limits.from_robot(robot)
+    n = shot.frames.shape[0]
+    common: dict[str, Any] = {
+        "shot": str(shot_path), "camera": shot.camera_path,
+        "robot": f"{robot.name} ({robot.source})", "fps": float(shot.fps),
+        "placement": _placement_text(analysis.placement.describe()),
+        "base2world": analysis.placement.base2world.copy(),
+        "joint_names": tuple(robot.joint_names), "revolute": limits.revolute.copy(),
+        "lower": limits.lower.copy(), "upper": limits.upper.copy(),
+        "velocity": limits.velocity.copy(), "acceleration": limits.acceleration.copy(),
+        "jerk": limits.jerk.copy(), "frame_numbers": shot.frames.astype(np.int64),
+        "camera_path": analysis.targets[:, :3, 3].copy(),
+        "camera_look": -analysis.targets[:, :3, 2],
+        "warnings": tuple(warnings), "source": "check" if error is not None else "convert",
+    }
+    poses, pose_frames, track = _in_memory_poses(analysis)
+    common.update(poses=poses, pose_frames=pose_frames, track=track)
+    if take is not None:
+        data = ReportData(
+            **common, status="ok", message="", timing=take.mode,
+            speed_factor=float(take.speed_factor), servo_rate_hz=float(take.rate),
+            max_speed=float(take.report.max_speed), t=take.t, q=take.q, qd=take.qd,
+            qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
+            shot_start=float(take.shot_start), shot_end=float(take.shot_end),
+            tolerance=OPTIMAL_RTOL if take.mode == "optimal" else LIMIT_RTOL,
+            violations=_violations(take.report.exceeded),
+        )
+        return data
+    empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, 8) for k in ("q", "qd", "qdd",
+                                                                            "qddd")}}
+    frame_times = shot.times - shot.times[0]
+    if isinstance(error, UnreachableFramesError) or path is None:
+        unreachable = tuple(sorted(int(e.frame) for e in getattr(error, "errors", ())
+                                   if e.frame is not None))
+        return ReportData(
+            **common, **empty, status="unreachable", message=str(error or ""),
+            timing=options.timing, speed_factor=math.nan, servo_rate_hz=math.nan,
+            max_speed=math.nan, frame_times=frame_times, shot_start=0.0,
+            shot_end=float(frame_times[-1]), unreachable=unreachable,
+        )
+    # The timing failed: show the shot at its own timing, where the check measured it.
+    max_speed = error.max_speed if isinstance(error, TimingLimitError) else math.nan
+    t, q, qd, qdd, qddd, rate = shot_timing_samples(analysis, options.rate, max_speed)
+    violations = _violations(getattr(error, "violations", []))
+    return ReportData(
+        **common, status="limits", message=str(error or ""), timing=options.timing,
+        speed_factor=1.0, servo_rate_hz=rate, max_speed=max_speed, t=t, q=q, qd=qd,
+        qdd=qdd, qddd=qddd, frame_times=frame_times[:n], shot_start=0.0,
+        shot_end=float(frame_times[-1]), violations=violations,
+    )
+
+
+def _violations(found: Sequence[Any]) -> tuple[Violation, ...]:
+    """The timing stage's own LimitViolations as report records."""
+    return tuple(Violation(v.axis, v.quantity, float(v.ratio), tuple(v.frames), v.describe())
+                 for v in found)
+
+
+def _with_violations(data: ReportData) -> ReportData:
+    from dataclasses import replace
+
+    return replace(data, violations=violations_from_samples(data))
+
+
+def _in_memory_poses(analysis: Analysis) -> tuple[Array, IntArray, Array]:
+    """Link origins of a few solved frames, their frame numbers and the track's ends."""
+    robot, path, shot = analysis.robot, analysis.path, analysis.shot
+    idx = pose_indices(0 if path is None else path.q.shape[0])
+    qs = robot.home[None] if path is None else path.q[idx]
+    frames = robot.link_frames(qs)
+    track = track_ends(frames[0], float(qs[0, 0]), float(robot.lower[0]),
+                       float(robot.upper[0]))
+    if path is None:  # nothing solved to draw; the track still shows where the robot is
+        return np.zeros((0, 11, 3)), idx, track
+    cams = frames[:, -1] @ robot.camera2flange
+    origins = np.concatenate(
+        [np.zeros((qs.shape[0], 1, 3)), frames[:, :, :3, 3], cams[:, None, :3, 3]], axis=1)
+    return origins, shot.frames[idx].astype(np.int64), track
+
+
+def shot_timing_samples(
+    analysis: Analysis, rate: float, max_speed: float
+) -> tuple[Array, Array, Array, Array, Array, float]:
+    """The shot part sampled at the film's own timing: what ``--timing shot`` checked.
+
+    ``time_shot`` in "shot" mode samples the path at the film's timing whatever the limits;
+    given limits loose enough to fit (scaled by the maximum feasible speed, positions
+    widened) it returns that take instead of raising, and its shot part is exactly the
+    samples the failed check measured. The run-up and run-out of that take mean nothing
+    (they are planned against the loosened limits) and are cut off.
+
+    Returns:
+        ``(t, q, qd, qdd, qddd, rate)``: times from the first film frame [s], (m,), the four
+        quantities (m, 8) and the servo rate [Hz].
+    """
+    from camtraj.timing import Limits, time_shot
+
+    robot, shot, path = analysis.robot, analysis.shot, analysis.path
+    assert path is not None
+    real = Limits.from_robot(robot)
+    f = 1.05 / max_speed if math.isfinite(max_speed) and max_speed > 0 else 1.0
+    f = max(1.0, f)
+    span = real.upper - real.lower
+    loose = Limits(lower=real.lower - 10 * span, upper=real.upper + 10 * span,
+                   velocity=real.velocity * f, acceleration=real.acceleration * f**2,
+                   jerk=real.jerk * f**3, names=real.names, kinds=real.kinds)
+    take = time_shot(path.q, shot.times, loose, mode="shot", rate=rate,
+                     frame_numbers=shot.frames)
+    a, b = int(take.frame_samples[0]), int(take.frame_samples[-1]) + 1
+    return (take.t[a:b] - take.t[a], take.q[a:b], take.qd[a:b], take.qdd[a:b],
+            take.qddd[a:b], float(take.rate))
+
+
+# ---------------------------------------------------------------------------------------------
+# Builder 2: a camtraj MCAP read back
+# ---------------------------------------------------------------------------------------------
+
+
+def from_take(take: ReadTake, source: str | Path) -> ReportData:
+    """The report of a converted take, from its MCAP file read back.
+
+    Raises:
+        InputError: The file lacks what a report needs (the robot's limits, the frames).
+    """
+    from camtraj.mcap_io import ROBOT_METADATA_NAME
+
+    md = take.metadata
+    robot_md = take.all_metadata.get(ROBOT_METADATA_NAME)
+    if not robot_md or take.frame_numbers.size < 1:
+        msg = f"{source}: no robot limits or no shot frames recorded; not a camtraj take?"
+        raise InputError(msg)
+    try:
+        lim = {k: np.asarray(json.loads(robot_md[k]), dtype=float)
+               for k in ("lower", "upper", "max_velocity", "max_acceleration", "max_jerk")}
+        placement = json.loads(md.get("placement", "{}"))
+        warnings = tuple(json.loads(md.get("warnings", "[]")))
+    except (KeyError, ValueError) as exc:
+        msg = f"{source}: the camtraj metadata cannot be read ({exc})"
+        raise InputError(msg) from exc
+    from camtraj.robot import JOINT_KINDS
+
+    names = tuple(take.trajectory_joint_names)
+    revolute = np.array([k == "revolute" for k in JOINT_KINDS])
+    t, q = take.trajectory_t, take.trajectory_q
+    qdd = take.trajectory_qdd
+    mode = md.get("timing_mode", "?")
+    poses, pose_frames, track = _tf_poses(take, float(lim["lower"][0]), float(lim["upper"][0]))
+    first, last = np.searchsorted(t, take.frame_times[[0, -1]] - 1e-9).tolist()
+    shot_samples = (int(first), int(last))
+    data = ReportData(
+        shot=md.get("source_file", "?"), camera=md.get("camera_prim", "?"),
+        robot=md.get("robot", "?"), status="ok", message="", timing=mode,
+        speed_factor=_float(md.get("speed_factor")), servo_rate_hz=_float(
+            md.get("servo_rate_hz")), fps=_float(md.get("fps")),
+        max_speed=_float(md.get("max_speed")), placement=_placement_text(placement),
+        base2world=_base2world(placement), joint_names=names, revolute=revolute,
+        lower=lim["lower"], upper=lim["upper"], velocity=lim["max_velocity"],
+        acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], t=t, q=q,
+        qd=take.trajectory_qd, qdd=qdd, qddd=jerk_by_differences(t, qdd, shot_samples),
+        frame_numbers=take.frame_numbers, frame_times=take.frame_times,
+        shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
+        camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
+        poses=poses, pose_frames=pose_frames, track=track, warnings=warnings,
+        tolerance=OPTIMAL_RTOL if mode == "optimal" else MCAP_RTOL, source=str(source),
+    )
+    return _with_violations(data)
+
+
+def _float(text: str | None) -> float:
+    try:
+        return float(text) if text is not None else math.nan
+    except ValueError:
+        return math.nan
+
+
+def _tf_poses(take: ReadTake, lower: float, upper: float) -> tuple[Array, IntArray, Array]:
+    """Link origins from /tf at a few film frames (the nearest /tf sample), and the track."""
+    from camtraj.urdf import BASE_FRAME, CAMERA_FRAME, LINK_FRAMES
+
+    chain = [*LINK_FRAMES, CAMERA_FRAME]
+    k_idx = pose_indices(take.frame_numbers.size)
+    tf_i = np.abs(take.tf_times[None, :] - take.frame_times[k_idx, None]).argmin(axis=1)
+
+    def to_base(frame: str, j: int) -> Array:
+        T = np.eye(4)
+        while frame != BASE_FRAME:
+            if frame in take.tf:
+                parent, mats = take.tf[frame]
+                T = mats[j] @ T
+            elif frame in take.tf_static:
+                parent, mat = take.tf_static[frame]
+                T = mat @ T
+            else:
+                msg = f"/tf has no path from {frame} to {BASE_FRAME}"
+                raise InputError(msg)
+            frame = parent
+        return T
+
+    frames = np.array([[to_base(f, int(j)) for f in chain] for j in tf_i])
+    origins = np.concatenate([np.zeros((len(tf_i), 1, 3)), frames[:, :, :3, 3]], axis=1)
+    q_track = float(np.interp(take.tf_times[tf_i[0]], take.trajectory_t,
+                              take.trajectory_q[:, 0]))
+    track = track_ends(frames[0], q_track, lower, upper)
+    return origins, take.frame_numbers[k_idx].astype(np.int64), track
+
+
+def report_from_mcap(path: str | Path) -> ReportData:
+    """Read a camtraj MCAP and build its report data (``camtraj report``)."""
+    from camtraj.mcap_io import read_take
+
+    return from_take(read_take(path), path)
+
+
+# ---------------------------------------------------------------------------------------------
+# The page
+# ---------------------------------------------------------------------------------------------
+
+_CSS = """
+:root { color-scheme: light; }
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, "DejaVu Sans",
+       "Liberation Sans", Arial, sans-serif; margin: 0 auto; max-width: 1320px;
+       padding: 16px 28px 48px; color: #1c1c1c; background: #fff; line-height: 1.4; }
+h1 { font-size: 1.5rem; margin: 0.2rem 0 0.4rem; word-break: break-all; }
+h2 { font-size: 1.15rem; margin: 1.6rem 0 0.5rem; border-bottom: 1px solid #ddd; }
+h3 { font-size: 1rem; margin: 1.2rem 0 0.2rem; }
+.status { display: inline-block; padding: 4px 12px; border-radius: 4px; font-weight: 600; }
+.status.ok { background: #e3f4e1; color: #1d5e1a; }
+.status.bad { background: #fde2e1; color: #9c1c1a; }
+table { border-collapse: collapse; font-size: 0.9rem; }
+td, th { padding: 3px 10px; border-bottom: 1px solid #eee; text-align: left;
+         vertical-align: top; }
+th { background: #f6f6f6; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+td.warn { background: #fff3d6; } td.over { background: #fde2e1; color: #9c1c1a;
+  font-weight: 600; }
+ul.problems li { color: #9c1c1a; } ul.warnings li { color: #7a5200; }
+nav a { margin-right: 0.8rem; } nav a.bad { color: #c62828; font-weight: 600; }
+figure { margin: 0.4rem 0 1.2rem; } figcaption { font-size: 0.85rem; margin-left: 4%; }
+.key { margin-right: 1.1rem; white-space: nowrap; }
+svg { width: 100%; height: auto; display: block; }
+footer { margin-top: 2rem; font-size: 0.8rem; color: #777; }
+"""
+
+_UNITS = {"position": "", "velocity": "/s", "acceleration": "/s²", "jerk": "/s³"}
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _floor_pct(x: float) -> str:
+    return f"{math.floor(100.0 * x)}%"
+
+
+def _facts(data: ReportData) -> list[tuple[str, str]]:
+    fn = data.frame_numbers
+    rows = [
+        ("shot", data.shot),
+        ("camera", data.camera),
+        ("frames", f"{fn[0]}-{fn[-1]} ({fn.size} frames at {data.fps:g} fps)"),
+        ("robot", data.robot),
+        ("placement", data.placement),
+        ("timing mode", data.timing),
+    ]
+    if data.t.size:
+        rows += [
+            ("speed factor", f"{data.speed_factor:.3f} (shot duration in the take / its own)"),
+            ("servo rate", f"{data.servo_rate_hz:.1f} Hz"),
+            ("take", f"{data.t[-1] - data.t[0]:.2f} s; shot {data.shot_start:.2f}-"
+                     f"{data.shot_end:.2f} s"),
+        ]
+    if math.isfinite(data.max_speed):
+        rows.append(("maximum feasible speed",
+                     f"{_floor_pct(data.max_speed)} of real time (could be shot at "
+                     f"{math.floor(100 * data.fps * data.max_speed) / 100:.2f} fps)"))
+    elif data.status != "unreachable":
+        rows.append(("maximum feasible speed", "not recorded in this file"))
+    if data.status == "ok":
+        rows.append(("run-up / run-out",
+                     f"{data.shot_start - data.t[0]:.2f} s / {data.t[-1] - data.shot_end:.2f} s"))
+    else:
+        rows.append(("run-up / run-out", "not planned: the shot itself cannot be done as asked"))
+    return rows
+
+
+def margins(data: ReportData) -> list[dict[str, Any]]:
+    """Per axis: peak use of each limit over the shot part, and the run-up / run-out extents
+    (display units: m or deg)."""
+    shot = data.shot_mask()
+    fr = fractions(data.q, data.qd, data.qdd, data.qddd, data.lower, data.upper,
+                   (data.velocity, data.acceleration, data.jerk))
+    up = data.t <= data.shot_start + 1e-9
+    out = data.t >= data.shot_end - 1e-9
+    rows = []
+    for i, name in enumerate(data.joint_names):
+        scale = math.degrees(1.0) if data.revolute[i] else 1.0
+
+        def extent(mask: NDArray[np.bool_], i: int = i, scale: float = scale) -> float:
+            x = data.q[mask, i]
+            return float((x.max() - x.min()) * scale) if x.size else 0.0
+
+        rows.append({
+            "axis": name, "unit": "deg" if data.revolute[i] else "m",
+            **{qn: float(np.abs(fr[qn][shot, i]).max()) for qn in QUANTITIES},
+            "runup": extent(up) if data.status == "ok" else math.nan,
+            "runout": extent(out) if data.status == "ok" else math.nan,
+        })
+    return rows
+
+
+def _margins_table(data: ReportData) -> str:
+    head = "".join(f"<th>{q}</th>" for q in QUANTITIES)
+    lines = [f"<table class='margins'><tr><th>axis</th>{head}<th>run-up extent</th>"
+             "<th>run-out extent</th></tr>"]
+    over = data.tolerance
+    for row in margins(data):
+        cells = []
+        for q in QUANTITIES:
+            v = row[q]
+            cls = "over" if v > 1 + over else "warn" if v > 0.8 else ""
+            cells.append(f"<td class='num {cls}'>{math.floor(100 * v)}%</td>")
+        ext = [("-" if not math.isfinite(row[k]) else f"{row[k]:.3f} {row['unit']}")
+               for k in ("runup", "runout")]
+        lines.append(f"<tr><td><a href='#axis-{_e(row['axis'])}'>{_e(row['axis'])}</a></td>"
+                     + "".join(cells) + "".join(f"<td class='num'>{x}</td>" for x in ext)
+                     + "</tr>")
+    lines.append("</table><p>Peak use of each limit over the shot (first to last film frame); "
+                 "position: 0% mid-range, 100% at a bound.</p>")
+    return "\n".join(lines)
+
+
+def render_html(data: ReportData) -> str:
+    """The whole report as one self-contained HTML page (no scripts, nothing fetched)."""
+    from camtraj.report_plots import COLORS, figures, limit_text
+
+    path_fig, axis_figs = figures(data)
+    title = Path(data.shot).name
+    if data.status == "ok":
+        status = "<p class='status ok'>The robot can do this shot as converted.</p>"
+    elif data.status == "limits":
+        status = (f"<p class='status bad'>NOT POSSIBLE with --timing {_e(data.timing)}: "
+                  f"{len(data.violations)} limit(s) exceeded.</p>")
+    else:
+        status = (f"<p class='status bad'>CANNOT BE REACHED: {len(data.unreachable)} "
+                  "frame(s) out of the robot's reach.</p>")
+    parts = [
+        "<!DOCTYPE html>", "<html lang='en'><head><meta charset='utf-8'>",
+        f"<title>camtraj report: {_e(title)}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        f"<header><h1>{_e(title)}</h1>{status}</header>",
+        "<section id='summary'><h2>Summary</h2><table class='facts'>",
+        *(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _facts(data)),
+        "</table>",
+    ]
+    if data.violations:
+        parts.append("<h3>Limits exceeded</h3><ul class='problems'>")
+        parts += [f"<li class='violation' data-axis='{_e(v.axis)}' "
+                  f"data-quantity='{_e(v.quantity)}' data-frames='{_e(v.frame_text)}'>"
+                  f"<a href='#axis-{_e(v.axis)}'>{_e(v.axis)}</a> "
+                  f"{_e(v.text.removeprefix(v.axis).strip())}</li>"
+                  for v in data.violations]
+        parts.append("</ul>")
+    if data.unreachable:
+        parts.append(f"<h3>Unreachable frames</h3><p class='problems'>"
+                     f"{_e(frame_ranges(list(data.unreachable)))}: {_e(data.message)}</p>")
+    if data.warnings:
+        parts.append("<h3>Warnings</h3><ul class='warnings'>")
+        parts += [f"<li>{_e(w)}</li>" for w in data.warnings]
+        parts.append("</ul>")
+    if data.t.size:
+        parts += ["<h3>Margins</h3>", _margins_table(data)]
+    parts.append("</section>")
+    if path_fig:
+        parts += ["<section id='path'><h2>Camera path and robot (robot base frame, to scale)"
+                  "</h2><p>Grey bar: the track from its minimum to its maximum travel. Stick "
+                  "figures: the robot at a few film frames (numbered), base to camera "
+                  "through the link origins. Arrows on the path: where the camera looks."
+                  "</p>", f"<figure>{path_fig}</figure></section>"]
+    if axis_figs:
+        bad = {v.axis for v in data.violations}
+        nav = " ".join(f"<a href='#axis-{_e(n)}'{' class=bad' if n in bad else ''}>{_e(n)}</a>"
+                       for n in data.joint_names)
+        parts += ["<section id='axes'><h2>Axes: use of the limits over take time</h2>",
+                  "<p>Each quantity as a fraction of its limit (±1: the limit lines). Shaded: "
+                  "the shot, from the first to the last film frame; ticks at the bottom: film "
+                  "frames; red: over a limit, with its frames.</p>", f"<nav>{nav}</nav>"]
+        for i, (name, svg) in enumerate(zip(data.joint_names, axis_figs, strict=True)):
+            key = " ".join(
+                f"<span class='key'><span style='color:{COLORS[q]}'>&#9644;</span> {q} "
+                f"{_e(limit_text(data, i, q))}</span>" for q in QUANTITIES)
+            parts.append(f"<figure id='axis-{_e(name)}' class='axis'>{svg}"
+                         f"<figcaption>{_e(name)}, ±1 is: {key}</figcaption></figure>")
+        parts.append("</section>")
+    parts.append(f"<footer>camtraj {_e(camtraj.__version__)} report from {_e(data.source)}"
+                 "</footer></body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def write_report(path: str | Path, data: ReportData, *, source: str | Path | None = None) -> None:
+    """Render ``data`` and write the HTML page to ``path`` atomically
+    (:class:`camtraj.outputs.OutputSet`: checked first, a temporary file, then a rename).
+
+    Args:
+        path: The HTML file.
+        data: What to show.
+        source: The file the data was read from, which ``path`` may not be.
+
+    Raises:
+        InputError: The file cannot be written, or it is ``source``.
+    """
+    from camtraj.outputs import OutputSet
+
+    with OutputSet() as outputs:
+        outputs.add(path, "-o")
+        if source is not None:
+            outputs.refuse_inputs([(source, "the MCAP the report is made from")])
+        outputs.write_bytes(path, render_html(data).encode("utf-8"))
+        outputs.commit()

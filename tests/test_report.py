@@ -1,0 +1,414 @@
+"""The HTML report (issue 9, item 2): ``camtraj report``, ``convert --report``, ``check --report``.
+
+Every command runs in a subprocess (the real command line), once, in a module fixture. The page
+is rendered by headless Chromium (Debian package ``chromium``; ``make chromium`` installs it)
+and the screenshot is read back as pixels. Independent facts: the violations ``check --json``
+prints (the timing stage's own check), forward kinematics of the solved frames against the
+link origins read from the MCAP's /tf, the SVG geometry of the drawn curves, spans and ticks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from camtraj import report as rp
+from camtraj.convert import analyse
+from camtraj.options import build_options
+from camtraj.report_plots import envelope
+from camtraj.robot import JOINT_NAMES, Robot
+from tests.test_convert import ROOT, SHOTS, error_line, leftovers, run_all, run_cli, usd_camera
+
+Array = NDArray[np.float64]
+
+MAYA = SHOTS / "maya_dolly_push_in.usda"
+WHIP = SHOTS / "whip_pan.usda"
+UNREACHABLE = SHOTS / "unreachable.usda"
+PLACEMENT = "0.5,0.3,0.0,10.0"  # x, y, z [m], yaw [deg]
+SVG_NS = "{http://www.w3.org/2000/svg}"
+WINDOW = (1400, 6400)  # tall enough for the whole page of a shot
+
+
+def chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def screenshot(html: Path, png: Path) -> NDArray[np.float32]:
+    """Render ``html`` with headless Chromium (no network) and return the PNG's RGB pixels."""
+    exe = chromium()
+    if exe is None:
+        pytest.skip("headless Chromium is not installed (Debian: apt-get install chromium, "
+                    "or `make chromium`)")
+    with tempfile.TemporaryDirectory(prefix="camtraj-chromium-") as profile:
+        proc = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+             "--no-first-run", "--disable-background-networking",
+             "--disable-component-update", "--disable-sync", f"--user-data-dir={profile}",
+             f"--screenshot={png}", f"--window-size={WINDOW[0]},{WINDOW[1]}",
+             html.resolve().as_uri()],
+            capture_output=True, text=True, timeout=300, check=False,
+        )
+    assert png.is_file(), f"chromium wrote no screenshot:\n{proc.stderr[-2000:]}"
+    from matplotlib.image import imread
+
+    pixels: NDArray[np.float32] = imread(str(png))[..., :3]
+    return pixels
+
+
+@dataclass(frozen=True)
+class Runs:
+    folder: Path
+    procs: dict[str, subprocess.CompletedProcess[str]]
+
+    def html(self, name: str) -> str:
+        return (self.folder / f"{name}.html").read_text(encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
+    d = tmp_path_factory.mktemp("report")
+    first = run_all({
+        "convert": ["convert", MAYA, "-o", d / "maya.mcap", "--placement", PLACEMENT,
+                    "--report", d / "convert.html", "--summary", d / "maya.json", "-q"],
+        "whip": ["check", WHIP, "--report", d / "whip.html", "--json"],
+        "unreachable": ["check", UNREACHABLE, "--report", d / "unreachable.html", "--json"],
+        "no_folder": ["check", MAYA, "--report", d / "missing" / "r.html"],
+    })
+    second = run_all({
+        "report": ["report", d / "maya.mcap", "-o", d / "report.html"],
+        "again": ["report", d / "maya.mcap", "-o", d / "again.html"],
+        "not_mcap": ["report", MAYA, "-o", d / "bad.html"],
+        "report_no_folder": ["report", d / "maya.mcap", "-o", d / "missing" / "r.html"],
+    })
+    return Runs(d, {**first, **second})
+
+
+def svgs(page: str) -> list[ET.Element]:
+    """Every inline <svg> of the page, parsed."""
+    return [ET.fromstring(m) for m in re.findall(r"<svg.*?</svg>", page, flags=re.DOTALL)]
+
+
+def by_id(root: ET.Element, gid: str) -> ET.Element:
+    found = [el for el in root.iter() if el.get("id") == gid]
+    assert len(found) == 1, f"expected one element {gid!r}, found {len(found)}"
+    return found[0]
+
+
+def subpaths(group: ET.Element) -> list[Array]:
+    """The points of every subpath (M ... L ...) of the <path>s under an element, SVG coords."""
+    out: list[Array] = []
+    for path in group.iter(f"{SVG_NS}path"):
+        for part in re.split(r"(?=M)", path.get("d", "")):
+            nums = [float(x) for x in re.findall(r"-?\d+(?:\.\d*)?(?:e-?\d+)?", part)]
+            if nums:
+                out.append(np.array(nums).reshape(-1, 2))
+    return out
+
+
+def axis_svg(page: str, axis: str) -> ET.Element:
+    for root in svgs(page):
+        if any(el.get("id") == f"{axis}-axes" for el in root.iter()):
+            return root
+    raise AssertionError(f"no figure for axis {axis}")
+
+
+# --------------------------------------------------------------------------------------------
+# The page: self-contained, with the summary and every plot
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["convert", "report", "whip", "unreachable"])
+def test_page_is_self_contained(runs: Runs, name: str) -> None:
+    page = runs.html(name)
+    assert page.startswith("<!DOCTYPE html>")
+    lowered = page.lower()
+    for bad in ("<script", "<link", "<img", "<iframe", "@import", "src=", "@font-face"):
+        assert bad not in lowered, f"{name}: the page holds {bad!r}"
+    assert not re.findall(r"url\((?!#)", lowered)  # only references inside the page
+    hrefs = re.findall(r"href\s*=\s*['\"]([^'\"]*)", page)
+    assert hrefs and all(h.startswith("#") for h in hrefs), [h for h in hrefs if h[:1] != "#"]
+    # the only URLs left are XML namespace names, which nothing fetches
+    urls = set(re.findall(r"https?://[^\s'\"<>]+", page))
+    assert urls <= {"http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink"}, urls
+    assert leftovers(runs.folder) == []
+
+
+@pytest.mark.parametrize("name", ["convert", "report"])
+def test_page_has_the_summary_and_every_plot(runs: Runs, name: str) -> None:
+    assert runs.procs[name].returncode == 0, runs.procs[name].stderr
+    page = runs.html(name)
+    summary = json.loads((runs.folder / "maya.json").read_text())
+    assert len(svgs(page)) == 1 + len(JOINT_NAMES)  # the views and one figure per axis
+    for axis, kind in zip(JOINT_NAMES, ("prismatic", "revolute", "revolute", "prismatic",
+                                        "revolute", "revolute", "revolute", "revolute"),
+                          strict=True):
+        root = axis_svg(page, axis)
+        texts = " ".join(t.text or "" for t in root.iter(f"{SVG_NS}text"))
+        assert f"{axis}  ({kind})" in texts
+        caption = re.search(rf"<figure id='axis-{axis}'.*?<figcaption>(.*?)</figcaption>",
+                            page, flags=re.DOTALL)
+        assert caption is not None
+        for quantity in rp.QUANTITIES:
+            assert quantity in caption.group(1)
+            by_id(root, f"{axis}-{quantity}-curve")
+    assert "top view" in page and "side view" in page
+    for fact in ("shot", "robot", "placement", "timing mode", "speed factor",
+                 "maximum feasible speed", "run-up / run-out", "Margins"):
+        assert f">{fact}<" in page
+    assert f"{math.floor(100 * summary['max_speed'])}% of real time" in page
+    assert "yaw 10.00 deg" in page
+    assert "Limits exceeded" not in page  # a feasible take exceeds nothing
+
+
+def test_both_sources_render_the_same_report(runs: Runs) -> None:
+    """convert --report (in memory) and camtraj report (the MCAP) agree, number for number."""
+    conv, rep = runs.html("convert"), runs.html("report")
+    summary_rows = re.compile(r"<tr><th>([^<]+)</th><td>([^<]*)</td></tr>")
+    assert summary_rows.findall(conv) == summary_rows.findall(rep)
+    cells = re.compile(r"<td class='num[^']*'>([^<]+)</td>")
+    a, b = cells.findall(conv), cells.findall(rep)
+    assert len(a) == len(b) == 8 * 6
+    for x, y in zip(a, b, strict=True):
+        if x.endswith("%"):  # jerk: exact in memory, by differences from the file
+            assert abs(int(x[:-1]) - int(y[:-1])) <= 1, (x, y)
+        else:
+            assert x == y
+
+
+def test_report_from_the_file_matches_the_run(runs: Runs, robot: Robot) -> None:
+    """Servo samples, frames, link origins (from /tf) and camera path agree with the run."""
+    options = build_options(camera=None, robot=None, placement=PLACEMENT, frames=None,
+                            rate=250.0, timing="shot")
+    analysis = analyse(MAYA, options)
+    mem = rp.from_analysis(analysis, MAYA, options)
+    disk = rp.report_from_mcap(runs.folder / "maya.mcap")
+    np.testing.assert_allclose(disk.t, mem.t, atol=1e-9)
+    np.testing.assert_allclose(disk.q, mem.q, atol=1e-12)
+    np.testing.assert_allclose(disk.qdd, mem.qdd, atol=1e-9)
+    # jerk by differences against the exact jerk: close over the shot (a smooth spline),
+    # and never above the true peak (ruckig's run-up and run-out switch jerk within a step)
+    shot = mem.shot_mask()
+    assert np.max(np.abs(disk.qddd - mem.qddd)[shot] / mem.jerk) < 0.02
+    assert np.all(np.abs(disk.qddd).max(axis=0) <= np.abs(mem.qddd).max(axis=0) * (1 + 1e-6))
+    np.testing.assert_array_equal(disk.frame_numbers, usd_camera(MAYA).frames)
+    np.testing.assert_allclose(disk.poses, mem.poses, atol=1e-9)  # /tf chain == FK
+    np.testing.assert_allclose(disk.track, mem.track, atol=1e-9)
+    np.testing.assert_allclose(disk.camera_path, mem.camera_path, atol=1e-9)
+    np.testing.assert_allclose(disk.base2world, mem.base2world, atol=1e-12)
+    assert disk.max_speed == mem.max_speed
+    # the stick figures end at the camera: FK of the solved frames
+    assert analysis.path is not None
+    idx = rp.pose_indices(analysis.path.q.shape[0])
+    cam = robot.camera_pose(analysis.path.q[idx])[:, :3, 3]
+    np.testing.assert_allclose(mem.poses[:, -1], cam, atol=1e-12)
+    # the track bar runs from the track's minimum to its maximum, along base x
+    np.testing.assert_allclose(np.diff(mem.track[:, 0]), robot.upper[0] - robot.lower[0])
+
+
+def test_report_files_are_deterministic(runs: Runs) -> None:
+    assert runs.procs["again"].returncode == 0
+    assert (runs.folder / "report.html").read_bytes() == (runs.folder / "again.html").read_bytes()
+
+
+# --------------------------------------------------------------------------------------------
+# The infeasible shot: the violation on the right axis and frames
+# --------------------------------------------------------------------------------------------
+
+
+def test_check_report_names_every_violation_with_axis_and_frames(runs: Runs) -> None:
+    proc = runs.procs["whip"]
+    assert proc.returncode == 3
+    expected = json.loads(proc.stdout)["violations"]
+    assert any(v["axis"] == "pan" and v["quantity"] == "acceleration" for v in expected)
+    page = runs.html("whip")
+    assert "NOT POSSIBLE" in page
+    items = re.findall(r"<li class='violation' data-axis='(\w+)' data-quantity='(\w+)' "
+                       r"data-frames='([^']+)'>(.*?)</li>", page)
+    assert sorted((a, q, f) for a, q, f, _ in items) == sorted(
+        (v["axis"], v["quantity"], v["frames"]) for v in expected)
+    for a, _q, f, text in items:
+        assert a in text and f.removeprefix("frames ") in text
+
+
+def test_check_report_highlights_the_violating_frames(runs: Runs) -> None:
+    """In each axis's SVG: a red span per violation run sits exactly over its frames' ticks,
+    and every drawn point beyond the limit lines lies inside the spans of that quantity."""
+    expected = json.loads(runs.procs["whip"].stdout)["violations"]
+    frames = usd_camera(WHIP).frames
+    page = runs.html("whip")
+    checked = 0
+    for axis in JOINT_NAMES:
+        root = axis_svg(page, axis)
+        ticks = subpaths(by_id(root, f"{axis}-frames"))
+        tick_x = np.array([p[0, 0] for p in ticks])
+        assert tick_x.size == frames.size  # one tick per film frame, in frame order
+        upper = subpaths(by_id(root, f"{axis}-limit-upper"))[0][0, 1]
+        lower = subpaths(by_id(root, f"{axis}-limit-lower"))[0][0, 1]
+        ids = {el.get("id") for el in root.iter()}
+        mine = [v for v in expected if v["axis"] == axis]
+        if not mine:
+            assert not any("violation" in (i or "") for i in ids), axis
+        for quantity in rp.QUANTITIES:
+            runs_q = [v for v in mine if v["quantity"] == quantity]
+            spans = []
+            for v in runs_q:
+                for part in v["frames"].removeprefix("frames ").split(", "):
+                    a, _, b = part.partition("-")
+                    fa, fb = int(a), int(b or a)
+                    span = subpaths(by_id(root, f"{axis}-{quantity}-violation-{fa}-{fb}"))[0]
+                    x0, x1 = span[:, 0].min(), span[:, 0].max()
+                    ia, ib = np.searchsorted(frames, [fa, fb])
+                    assert x0 == pytest.approx(tick_x[ia], abs=0.05)
+                    assert x1 == pytest.approx(tick_x[ib], abs=0.05)
+                    spans.append((x0, x1))
+                    checked += 1
+            curve = np.concatenate(subpaths(by_id(root, f"{axis}-{quantity}-curve")))
+            beyond = curve[(curve[:, 1] < upper - 0.3) | (curve[:, 1] > lower + 0.3)]
+            if not runs_q:
+                assert beyond.size == 0, (axis, quantity)
+                continue
+            assert beyond.size > 0, (axis, quantity)
+            # a drawn segment may cross the limit line up to one servo step before a frame
+            slack = 0.15 * float(np.diff(tick_x).mean())
+            inside = np.zeros(beyond.shape[0], dtype=bool)
+            for x0, x1 in spans:
+                inside |= (beyond[:, 0] >= x0 - slack) & (beyond[:, 0] <= x1 + slack)
+            assert inside.all(), (axis, quantity, beyond[~inside][:5])
+    assert checked >= len(expected)
+
+
+def test_check_report_of_unreachable_frames_marks_them(runs: Runs) -> None:
+    proc = runs.procs["unreachable"]
+    assert proc.returncode == 3
+    unreachable = [u["frame"] for u in json.loads(proc.stdout)["unreachable"]]
+    page = runs.html("unreachable")
+    assert "CANNOT BE REACHED" in page
+    assert f"frames {min(unreachable)}-{max(unreachable)}" in page
+    (view,) = [r for r in svgs(page) if any(e.get("id") == "view-1" for e in r.iter())]
+    marks = subpaths(by_id(view, "view-1-unreachable"))
+    assert sum(len(m) for m in marks) >= 1
+
+
+def test_reports_refuse_bad_input_with_exit_2(runs: Runs) -> None:
+    for key in ("not_mcap", "no_folder", "report_no_folder"):
+        proc = runs.procs[key]
+        assert proc.returncode == 2, (key, proc.stderr)
+        error_line(proc)
+    assert "missing" in error_line(runs.procs["no_folder"])
+    assert not (runs.folder / "bad.html").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Rendered for real: headless Chromium
+# --------------------------------------------------------------------------------------------
+
+
+def shading_bands(pixels: NDArray[np.float32]) -> int:
+    """Horizontal bands of the page holding the plots' shot shading (#e6eef8)."""
+    shade = np.array([0xE6, 0xEE, 0xF8]) / 255.0
+    near = np.all(np.abs(pixels - shade) < 4 / 255.0, axis=2)
+    rows = np.flatnonzero(near.sum(axis=1) > 300)
+    if rows.size == 0:
+        return 0
+    return int(1 + np.count_nonzero(np.diff(rows) > 40))  # grid lines cut a band, not 40 px
+
+
+def test_chromium_renders_the_report(runs: Runs) -> None:
+    pixels = screenshot(runs.folder / "report.html", runs.folder / "report.png")
+    assert pixels.shape[:2] == (WINDOW[1], WINDOW[0])
+    non_white = np.any(pixels < 0.94, axis=2)
+    assert non_white.mean() > 0.08, "the page looks blank"
+    assert pixels.std() > 0.05
+    assert shading_bands(pixels) == len(JOINT_NAMES)  # every axis plot drawn
+    # the curves: many pixels of the velocity and acceleration colours
+    for colour in ("#1f5fa8", "#e08a00"):
+        rgb = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)]) / 255.0
+        assert np.count_nonzero(np.all(np.abs(pixels - rgb) < 0.12, axis=2)) > 2000, colour
+
+
+def test_chromium_shows_the_violation_in_red(runs: Runs) -> None:
+    pixels = screenshot(runs.folder / "whip.html", runs.folder / "whip.png")
+    red = (pixels[..., 0] > 0.75) & (pixels[..., 1] < 0.35) & (pixels[..., 2] < 0.35)
+    assert np.count_nonzero(red) > 3000
+    assert shading_bands(pixels) == len(JOINT_NAMES)
+
+
+# --------------------------------------------------------------------------------------------
+# Small pieces
+# --------------------------------------------------------------------------------------------
+
+
+def test_envelope_keeps_every_column_extreme() -> None:
+    rng = np.random.default_rng(0)
+    t = np.sort(rng.uniform(0.0, 60.0, 15000))
+    y = np.cumsum(rng.normal(size=t.size))
+    te, ye = envelope(t, y, columns=100)
+    assert te.size <= 200 and np.all(np.diff(te) >= 0)
+    keep = np.searchsorted(t, te)
+    np.testing.assert_array_equal(t[keep], te)
+    np.testing.assert_array_equal(y[keep], ye)  # real samples, in order
+    col = np.minimum((t - t[0]) / (t[-1] - t[0]) * 100, 99).astype(int)
+    col_e = np.minimum((te - t[0]) / (t[-1] - t[0]) * 100, 99).astype(int)
+    for c in range(100):
+        assert y[col == c].max() in ye[col_e == c]
+        assert y[col == c].min() in ye[col_e == c]
+
+
+def test_a_one_minute_take_renders_under_1_5_mb(runs: Runs) -> None:
+    """15 000 servo samples (a minute at 250 Hz) of a busy move: the envelope keeps it small."""
+    base = rp.report_from_mcap(runs.folder / "maya.mcap")
+    t = np.linspace(0.0, 60.0, 15000)
+    wiggle = np.sin(t[:, None] * np.arange(1, 9)[None, :] * 3.1)
+    long = dataclasses.replace(
+        base, t=t, q=0.5 * (base.lower + base.upper) + 0.4 * wiggle * (base.upper - base.lower),
+        qd=0.9 * wiggle * base.velocity, qdd=0.9 * wiggle * base.acceleration,
+        qddd=0.9 * np.cos(t[:, None] * 7.0) * base.jerk,
+        frame_numbers=np.arange(1, 1441), frame_times=np.arange(1440) / 24.0 + 0.5,
+        shot_start=0.5, shot_end=0.5 + 1439 / 24.0, violations=())
+    page = rp.render_html(long)
+    assert len(page.encode()) < 1.5e6
+    assert len(svgs(page)) == 1 + len(JOINT_NAMES)
+
+
+def test_report_does_not_slow_the_start_of_convert() -> None:
+    """matplotlib is imported only when a report is asked for."""
+    code = ("import sys, camtraj.cli, camtraj.convert, camtraj.report; "
+            "print('matplotlib' in sys.modules)")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, check=True, timeout=120)
+    assert out.stdout.strip() == "False"
+
+
+def test_write_report_leaves_an_existing_file_when_the_folder_is_missing(tmp_path: Path) -> None:
+    target = tmp_path / "nope" / "r.html"
+    with pytest.raises(rp.InputError, match="does not exist"):
+        rp.write_html(target, "<!DOCTYPE html>")
+    good = tmp_path / "r.html"
+    rp.write_html(good, "first")
+    rp.write_html(good, "second")
+    assert good.read_text() == "second" and leftovers(tmp_path) == []
+
+
+def test_cli_help_lists_the_report(runs: Runs) -> None:
+    for args in (["report", "--help"], ["convert", "--help"], ["check", "--help"]):
+        proc = run_cli(*args)
+        assert proc.returncode == 0 and "REPORT.html" in proc.stdout
