@@ -258,3 +258,33 @@ def test_a_shot_ending_at_full_speed_while_accelerating_is_slowed_for_its_run_ou
     assert np.all(np.abs(take.qd) <= limits.velocity * (1 + 1e-9))
     v = divided(take.t, take.q, 1)
     assert np.max(np.abs(v) / limits.velocity) <= 1 + SLACK
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_paths_pass_every_frame_hold_still_and_stay_inside(seed: int) -> None:
+    # Random walks with holds, squeezed into a narrow range so that many frames sit on or
+    # next to a limit (clipped at it, as a solver riding the limit writes them).
+    rng = np.random.default_rng(seed)
+    n = 120
+    lower, upper = np.full(8, -0.05), np.full(8, 0.05)
+    steps = rng.normal(scale=0.02, size=(n, 8)) * (rng.random((n, 8)) > 0.2)
+    q = np.clip(np.cumsum(steps, axis=0), lower, upper)
+    path = FramePath.fit(q, 1 / FPS, lower, upper)
+    x = np.linspace(0.0, n - 1.0, 200 * (n - 1) + 1)
+    p = path.at(x, 2)
+    assert np.all(p[0] <= upper) and np.all(p[0] >= lower)
+    assert np.array_equal(p[0][::200], q)
+    # The plain spline (the same frames with the limits out of the way) does overshoot.
+    plain = FramePath.fit(q, 1 / FPS, lower - 1.0, upper + 1.0).at(x, 0)[0]
+    assert np.any(plain > upper) or np.any(plain < lower)
+    assert np.any(path.clamped_for_limits)
+    # Where two frames are equal the axis stands exactly still between them.
+    for j in range(8):
+        for i in np.flatnonzero(q[1:, j] == q[:-1, j]):
+            seg = slice(200 * i, 200 * (i + 1) + 1)
+            assert np.all(p[0][seg, j] == q[i, j])
+            assert np.all(p[1][seg, j] == 0.0)
+    # Acceleration is continuous across frames (the path is C2 everywhere).
+    left = path.at(np.arange(1, n) - 1e-9, 2)[2]
+    right = path.at(np.arange(1, n, dtype=np.float64), 2)[2]
+    assert np.allclose(left, right, atol=1e-6 * (1 + np.abs(right).max()))
