@@ -201,6 +201,9 @@ def convert(
         from camtraj.usd_rig import check_rig_path
 
         check_rig_path(rig_layer)
+        if Path(rig_layer).resolve() == Path(shot_path).resolve():
+            msg = f"--usd {rig_layer} is the shot itself; give the rig layer its own file name"
+            raise InputError(msg)
     bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
     try:
         analysis = analyse(shot_path, options, progress=bar.update, on_frames=bar.start)

@@ -291,3 +291,7 @@ def test_bad_rig_paths_fail_before_work_and_keep_old_files(
     with pytest.raises(InputError, match="does not exist"):
         convert(c.shot, tmp_path / "x.mcap", rig_layer=tmp_path / "nope" / "rig.usda")
     assert list(tmp_path.iterdir()) == []
+    before = c.shot.read_bytes()
+    with pytest.raises(InputError, match="is the shot itself"):
+        convert(c.shot, tmp_path / "x.mcap", OPTIONS, rig_layer=c.shot)
+    assert c.shot.read_bytes() == before
