@@ -288,6 +288,11 @@ def test_bad_rig_paths_fail_before_work_and_keep_old_files(
     c = converted["zup_m"]
     with pytest.raises(InputError, match=r"must end in \.usda"):
         convert(c.shot, tmp_path / "x.mcap", rig_layer=tmp_path / "rig.txt")
-    with pytest.raises(InputError, match="does not exist"):
-        convert(c.shot, tmp_path / "x.mcap", rig_layer=tmp_path / "nope" / "rig.usda")
-    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "a_file").write_text("not a folder")
+    with pytest.raises(InputError, match="is a file, not a folder"):
+        convert(c.shot, tmp_path / "x.mcap", rig_layer=tmp_path / "a_file" / "rig.usda")
+    assert [p.name for p in tmp_path.iterdir()] == ["a_file"]
+    before = c.shot.read_bytes()
+    with pytest.raises(InputError, match="it is the shot"):
+        convert(c.shot, tmp_path / "x.mcap", OPTIONS, rig_layer=c.shot)
+    assert c.shot.read_bytes() == before
