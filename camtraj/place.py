@@ -32,7 +32,7 @@ import click
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError
+from camtraj.errors import CamtrajError, InfeasibleError, InputError, UnreachableFramesError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_xy
@@ -195,6 +195,8 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     except UnreachableFramesError as exc:
         return Result(x, y, yaw_deg, full, 1.0 - len(exc.errors) / len(idx), False, False, 0.0,
                       "", {}, str(exc))
+    except CamtrajError as exc:
+        return Result(x, y, yaw_deg, full, 0.0, False, False, 0.0, "", {}, str(exc))
     marg = margins(robot, path.q)
     try:
         take = time_shot(path.q, times, Limits.from_robot(robot), mode="scale",
@@ -499,7 +501,11 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
                 good &= (arr[:, 2] >= yaw_lo - 1e-9) & (arr[:, 2] <= yaw_hi + 1e-9)
             else:
                 arr[:, 2] = (arr[:, 2] + 180.0) % 360.0 - 180.0
-            coarse += runner.run([(*map(float, c), stride) for c in arr[good]])
+            seen = {(round(r.x, 6), round(r.y, 6), round(r.yaw_deg, 6)) for r in coarse}
+            todo = {(round(float(c[0]), 6), round(float(c[1]), 6), round(float(c[2]), 6)): c
+                    for c in arr[good]}
+            coarse += runner.run([(*map(float, c), stride) for k, c in todo.items()
+                                  if k not in seen])
         ranked = sorted(coarse, key=lambda r: r.key(), reverse=True)
         finalists = _distinct(ranked, max(FULL_KEEP, min(top, len(ranked))))
         full = runner.run([(r.x, r.y, r.yaw_deg, 1) for r in finalists])
