@@ -160,6 +160,7 @@ def main() -> None:
     \b
     camtraj convert shot.usd -o shot.mcap   the main job
     camtraj check shot.usd                  can the robot do it? (no output file)
+    camtraj place shot.usd -o set.toml      where to lay the track for it
     camtraj info shot.mcap                  what a converted file holds
     camtraj batch / farm                    many shots, locally or on a render farm
 
@@ -465,6 +466,12 @@ def _report(r: dict[str, Any]) -> str:
                  f"column: travel per axis)")
     lines.append(f"  run-up {r['runup']['duration_s']:.2f} s, run-out "
                  f"{r['runout']['duration_s']:.2f} s")
+    if r.get("collision"):
+        c = r["collision"]
+        near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None
+                else f"closest {c['closest_m']:.3f} m")
+        lines.append(f"  obstacles {', '.join(c['prims'])}: clearance {c['clearance_m']:.3f} m, "
+                     f"{near}")
     lines += [f"  warning: {w}" for w in r["warnings"]]
     if r.get("output"):
         lines.append(f"  wrote {r['output']}")

@@ -180,14 +180,15 @@ def analyse(
         )
     set_file = SetFile.read(options.set_file) if options.set_file is not None else None
     if set_file is not None and set_file.prims:
-        from camtraj.collision import check_take
+        from camtraj.collision import NEAR, check_take
 
         clearance = set_file.clearance_m if options.clearance is None else options.clearance
         with _stage(timings, "collision"):
             closest = check_take(shot_path, robot, placement.base2world, analysis.take,
                                  shot.time_codes, set_file.prims, clearance)
         analysis.collision = {"prims": list(set_file.prims), "clearance_m": clearance,
-                              "closest_m": closest if math.isfinite(closest) else None}
+                              "closest_m": closest if math.isfinite(closest) else None,
+                              "measured_within_m": clearance + NEAR}
     return analysis
 
 

@@ -87,6 +87,10 @@ class LimitError(InfeasibleError):
     """The timed move exceeds a velocity, acceleration or jerk limit."""
 
 
+class PlacementError(InfeasibleError):
+    """No placement of the robot can do the shot (``camtraj place``); the message says why."""
+
+
 class CollisionError(InfeasibleError):
     """The robot comes closer to an obstacle of the set than the clearance allows.
 

@@ -233,7 +233,14 @@ def test_place_with_the_wall_as_obstacle_keeps_the_clearance(
     base2world[:3, :3] = meta["rotation"]
     base2world[:3, 3] = meta["translation_m"]
     q = take.q[::2]  # every other servo sample of the whole take (run-up and run-out too)
-    assert wall_distances(robot, q, base2world, wall["shot"]) >= clearance - 1e-3
+    d = wall_distances(robot, q, base2world, wall["shot"])
+    assert d >= clearance - 1e-3
+    # asking for more clearance than there is: check names the approach, measured alike
+    proc = run("check", wall["shot"], "--set-file", placed, "--clearance", d + 0.05, "--json")
+    assert proc.returncode == 3, proc.stderr
+    r = json.loads(proc.stdout)
+    assert r["status"] == "collision" and r["prim"] == "/World/set/wall"
+    assert r["distance_m"] == pytest.approx(d, abs=0.02)
 
 
 @pytest.mark.parametrize(
