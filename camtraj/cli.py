@@ -20,7 +20,7 @@ import click
 import camtraj
 from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
-from camtraj.errors import CamtrajError, UnreachableFramesError
+from camtraj.errors import CamtrajError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -229,9 +229,11 @@ def check(shot: str, as_json: bool, quiet: bool, **kw: Any) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(mcap_file: str, as_json: bool) -> None:
     """Show what a camtraj MCAP file holds: shot, frames, duration, rate, topics, limits."""
+    from camtraj.inputs import require_regular_file
     from camtraj.mcap_io import describe
 
     try:
+        require_regular_file(mcap_file, "MCAP file", InputError)  # a FIFO would block
         d = describe(mcap_file)
     except CamtrajError as exc:
         _fail(exc)

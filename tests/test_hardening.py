@@ -443,6 +443,7 @@ def _corpus(base: Path) -> tuple[dict[str, Case], Path]:
         stdout="/dev/full")
     add("info_stdout_full", ["info", "{good_mcap}"], "standard output", stdout="/dev/full")
     add("info_of_a_usda", ["info", good], "maya.usda")
+    add("info_of_a_fifo", ["info", inputs / "pipe.mcap"], "named pipe")
     return cases, inputs
 
 
