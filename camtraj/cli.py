@@ -82,6 +82,9 @@ class _Main(click.Group):
         if not kwargs.get("standalone_mode", True):
             return super().main(*args, **kwargs)
         kwargs["standalone_mode"] = False
+        for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 prints too
+            with contextlib.suppress(AttributeError, ValueError):
+                stream.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]
         code: Any = 0
         try:
             rv = super().main(*args, **kwargs)
