@@ -20,7 +20,7 @@ import click
 import camtraj
 from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
-from camtraj.errors import CamtrajError, CollisionError, UnreachableFramesError
+from camtraj.errors import CamtrajError, CollisionError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.place import place_command
 from camtraj.progress import Silent, TerminalProgress, progress_for
@@ -91,6 +91,9 @@ class _Main(click.Group):
         if not kwargs.get("standalone_mode", True):
             return super().main(*args, **kwargs)
         kwargs["standalone_mode"] = False
+        for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 prints too
+            with contextlib.suppress(AttributeError, ValueError):
+                stream.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]
         code: Any = 0
         try:
             rv = super().main(*args, **kwargs)
@@ -269,9 +272,11 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(mcap_file: str, as_json: bool) -> None:
     """Show what a camtraj MCAP file holds: shot, frames, duration, rate, topics, limits."""
+    from camtraj.inputs import require_regular_file
     from camtraj.mcap_io import describe
 
     try:
+        require_regular_file(mcap_file, "MCAP file", InputError)  # a FIFO would block
         d = describe(mcap_file)
     except CamtrajError as exc:
         _fail(exc)

@@ -443,6 +443,7 @@ def _corpus(base: Path) -> tuple[dict[str, Case], Path]:
         stdout="/dev/full")
     add("info_stdout_full", ["info", "{good_mcap}"], "standard output", stdout="/dev/full")
     add("info_of_a_usda", ["info", good], "maya.usda")
+    add("info_of_a_fifo", ["info", inputs / "pipe.mcap"], "named pipe")
     return cases, inputs
 
 
@@ -611,3 +612,18 @@ def test_nearly_still_camera_caps_the_speed_shown(tmp_path: Path) -> None:
 def _no_constant(name: str) -> None:
     msg = f"{name} is not JSON"
     raise ValueError(msg)
+
+
+def test_output_names_that_are_not_utf8_are_written_and_reported(tmp_path: Path) -> None:
+    """Linux file names are bytes; the report prints them escaped even on a strict stdout."""
+    out = os.fsdecode(bytes(tmp_path) + b"/take\xff.mcap")
+    summary = os.fsdecode(bytes(tmp_path) + b"/take\xfe.json")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONIOENCODING": "utf-8:strict"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "camtraj", "convert", str(MAYA), "-o", out, "--summary", summary],
+        capture_output=True, text=True, env=env, timeout=600, check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "wrote " in proc.stdout and "take\\udcff.mcap" in proc.stdout
+    assert os.path.getsize(out) > 0
+    assert json.loads(Path(summary).read_text())["status"] == "ok"
