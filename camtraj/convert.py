@@ -215,7 +215,7 @@ def convert(
             from camtraj import report as html_report
 
             html_report.write_report(report, html_report.from_analysis(
-                started[0], shot_path, options, error=exc))
+                started[0], shot_path, options, error=exc, source="check"))
         raise
     finally:
         bar.close()
@@ -225,7 +225,8 @@ def convert(
 
         with _stage(analysis.timings, "report"):
             page = html_report.render_html(html_report.from_analysis(
-                analysis, shot_path, options, warnings=run_warnings(analysis)))
+                analysis, shot_path, options, warnings=run_warnings(analysis),
+                source="convert" if output_path is not None else "check"))
     if output_path is not None:
         with _stage(analysis.timings, "write"):
             write_take(output_path, take_data(analysis), analysis.robot,

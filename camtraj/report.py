@@ -288,6 +288,7 @@ def from_analysis(
     *,
     warnings: Sequence[str] = (),
     error: InfeasibleError | None = None,
+    source: str = "convert",
 ) -> ReportData:
     """The report of a run: a finished take, or a shot that failed with ``error``.
 
@@ -298,6 +299,7 @@ def from_analysis(
         options: The run's options (timing mode, servo rate).
         warnings: The run's warnings (convert.summary's).
         error: The failure, when the shot cannot be done as asked.
+        source: The command that ran (shown in the page's footer).
     """
     from camtraj.timing import Limits, TimingLimitError
 
@@ -315,7 +317,7 @@ def from_analysis(
         "jerk": limits.jerk.copy(), "frame_numbers": shot.frames.astype(np.int64),
         "camera_path": analysis.targets[:, :3, 3].copy(),
         "camera_look": -analysis.targets[:, :3, 2],
-        "warnings": tuple(warnings), "source": "check" if error is not None else "convert",
+        "warnings": tuple(warnings), "source": source,
     }
     poses, pose_frames, track = _in_memory_poses(analysis)
     common.update(poses=poses, pose_frames=pose_frames, track=track)

@@ -91,6 +91,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
         "whip": ["check", WHIP, "--report", d / "whip.html", "--json"],
         "unreachable": ["check", UNREACHABLE, "--report", d / "unreachable.html", "--json"],
         "no_folder": ["check", MAYA, "--report", d / "missing" / "r.html"],
+        "convert_fails": ["convert", WHIP, "-o", d / "whip.mcap", "--report",
+                          d / "whip_convert.html"],
     })
     second = run_all({
         "report": ["report", d / "maya.mcap", "-o", d / "report.html"],
@@ -305,6 +307,16 @@ def test_check_report_of_unreachable_frames_marks_them(runs: Runs) -> None:
     (view,) = [r for r in svgs(page) if any(e.get("id") == "view-1" for e in r.iter())]
     marks = subpaths(by_id(view, "view-1-unreachable"))
     assert sum(len(m) for m in marks) >= 1
+
+
+def test_convert_of_an_infeasible_shot_writes_neither_file(runs: Runs) -> None:
+    """All or nothing: convert writes the report only with the MCAP (check reports why)."""
+    proc = runs.procs["convert_fails"]
+    assert proc.returncode == 3
+    error_line(proc)
+    assert not (runs.folder / "whip.mcap").exists()
+    assert not (runs.folder / "whip_convert.html").exists()
+    assert "report from check" in runs.html("whip")
 
 
 def test_reports_refuse_bad_input_with_exit_2(runs: Runs) -> None:
