@@ -151,6 +151,10 @@ def test_page_is_self_contained(runs: Runs, name: str) -> None:
     urls = set(re.findall(r"https?://[^\s'\"<>]+", page))
     assert urls <= {"http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink"}, urls
     assert leftovers(runs.folder) == []
+    ids = re.findall(r"\bid=['\"]([^'\"]+)", page)
+    assert len(ids) == len(set(ids)), "element ids repeat in the page"
+    refs = set(re.findall(r"url\(#([^)]+)\)", page)) | set(re.findall(r"href=\"#([^\"]+)", page))
+    assert refs <= set(ids), refs - set(ids)  # every reference inside the page resolves
 
 
 @pytest.mark.parametrize("name", ["convert", "report"])
