@@ -28,8 +28,9 @@ from numpy.typing import NDArray
 
 from camtraj import report as rp
 from camtraj.convert import analyse
+from camtraj.errors import InputError
 from camtraj.options import build_options
-from camtraj.report_plots import envelope
+from camtraj.report.plots import envelope
 from camtraj.robot import JOINT_NAMES, Robot
 from tests.test_convert import ROOT, SHOTS, error_line, leftovers, run_all, run_cli, usd_camera
 
@@ -416,7 +417,7 @@ def test_report_does_not_slow_the_start_of_convert() -> None:
 
 def test_write_report_leaves_an_existing_file_when_the_folder_is_missing(tmp_path: Path) -> None:
     target = tmp_path / "nope" / "r.html"
-    with pytest.raises(rp.InputError, match="does not exist"):
+    with pytest.raises(InputError, match="does not exist"):
         rp.write_html(target, "<!DOCTYPE html>")
     good = tmp_path / "r.html"
     rp.write_html(good, "first")

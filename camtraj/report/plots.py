@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:  # the report module imports this one; no cycle at run time
-    from camtraj.report import ReportData
+if TYPE_CHECKING:
+    from camtraj.report.data import ReportData
 
 Array = NDArray[np.float64]
 
