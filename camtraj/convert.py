@@ -200,9 +200,10 @@ def convert(
     (exit 2) or ``InfeasibleError`` (exit 3) with the frames, axes and margins named; a failed
     run writes nothing and leaves an existing output untouched.
 
-    ``report``: also write the HTML report (camtraj.report) there, after the MCAP (if that
-    fails, the MCAP is removed again). Without an MCAP (``check``) a shot that cannot be done
-    gets its report too, showing why, before the error is raised.
+    ``report``: also write the HTML report (camtraj.report) there: rendered before the MCAP
+    is written and written after it (if writing it fails, the MCAP is removed again). Without
+    an MCAP (``check``) a shot that cannot be done gets its report too, showing why, before
+    the error is raised.
     """
     options = options or ConvertOptions()
     bar = _ProgressBar(enabled=progress, label=Path(shot_path).name)
@@ -231,9 +232,11 @@ def convert(
         with _stage(analysis.timings, "write"):
             write_take(output_path, take_data(analysis), analysis.robot,
                        metadata(analysis, shot_path, options))
-    if report is not None and page is not None:
+    if report is not None and page is not None:  # (both or neither)
+        from camtraj.report import write_html
+
         try:
-            html_report.write_html(report, page)
+            write_html(report, page)
         except BaseException:
             if output_path is not None:  # all or nothing
                 Path(output_path).unlink(missing_ok=True)
