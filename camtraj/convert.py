@@ -241,7 +241,7 @@ def convert(
                 from camtraj import report as html_report
 
                 page = html_report.render_html(html_report.from_analysis(
-                    started[0], shot_path, options, error=exc))
+                    started[0], shot_path, options, error=exc, source="check"))
                 outputs.write_bytes(report, page.encode("utf-8"))
                 outputs.commit()
             raise
@@ -264,7 +264,8 @@ def convert(
             progress.stage("report")
             with _stage(analysis.timings, "report"):
                 page = html_report.render_html(html_report.from_analysis(
-                    analysis, shot_path, options, warnings=run_warnings(analysis)))
+                    analysis, shot_path, options, warnings=run_warnings(analysis),
+                    source="convert" if output_path is not None else "check"))
             outputs.write_bytes(report, page.encode("utf-8"))
         result = summary(analysis, shot_path, output_path, options)
         if summary_path is not None:

@@ -28,8 +28,9 @@ from numpy.typing import NDArray
 
 from camtraj import report as rp
 from camtraj.convert import analyse
+from camtraj.errors import InputError
 from camtraj.options import build_options
-from camtraj.report_plots import envelope
+from camtraj.report.plots import envelope
 from camtraj.robot import JOINT_NAMES, Robot
 from tests.test_convert import ROOT, SHOTS, error_line, leftovers, run_all, run_cli, usd_camera
 
@@ -91,6 +92,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
         "whip": ["check", WHIP, "--report", d / "whip.html", "--json"],
         "unreachable": ["check", UNREACHABLE, "--report", d / "unreachable.html", "--json"],
         "no_folder": ["check", MAYA, "--report", d / "missing" / "r.html"],
+        "convert_fails": ["convert", WHIP, "-o", d / "whip.mcap", "--report",
+                          d / "whip_convert.html"],
     })
     second = run_all({
         "report": ["report", d / "maya.mcap", "-o", d / "report.html"],
@@ -149,6 +152,10 @@ def test_page_is_self_contained(runs: Runs, name: str) -> None:
     urls = set(re.findall(r"https?://[^\s'\"<>]+", page))
     assert urls <= {"http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink"}, urls
     assert leftovers(runs.folder) == []
+    ids = re.findall(r"\bid=['\"]([^'\"]+)", page)
+    assert len(ids) == len(set(ids)), "element ids repeat in the page"
+    refs = set(re.findall(r"url\(#([^)]+)\)", page)) | set(re.findall(r"href=\"#([^\"]+)", page))
+    assert refs <= set(ids), refs - set(ids)  # every reference inside the page resolves
 
 
 @pytest.mark.parametrize("name", ["convert", "report"])
@@ -307,6 +314,16 @@ def test_check_report_of_unreachable_frames_marks_them(runs: Runs) -> None:
     assert sum(len(m) for m in marks) >= 1
 
 
+def test_convert_of_an_infeasible_shot_writes_neither_file(runs: Runs) -> None:
+    """All or nothing: convert writes the report only with the MCAP (check reports why)."""
+    proc = runs.procs["convert_fails"]
+    assert proc.returncode == 3
+    error_line(proc)
+    assert not (runs.folder / "whip.mcap").exists()
+    assert not (runs.folder / "whip_convert.html").exists()
+    assert "report from check" in runs.html("whip")
+
+
 def test_reports_refuse_bad_input_with_exit_2(runs: Runs) -> None:
     for key in ("not_mcap", "no_folder", "report_no_folder"):
         proc = runs.procs[key]
@@ -400,7 +417,7 @@ def test_report_does_not_slow_the_start_of_convert() -> None:
 
 def test_write_report_leaves_an_existing_file_when_the_folder_is_missing(tmp_path: Path) -> None:
     target = tmp_path / "nope" / "r.html"
-    with pytest.raises(rp.InputError, match="does not exist"):
+    with pytest.raises(InputError, match="does not exist"):
         rp.write_html(target, "<!DOCTYPE html>")
     good = tmp_path / "r.html"
     rp.write_html(good, "first")

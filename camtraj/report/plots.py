@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:  # the report module imports this one; no cycle at run time
-    from camtraj.report import ReportData
+if TYPE_CHECKING:
+    from camtraj.report.data import ReportData
 
 Array = NDArray[np.float64]
 
@@ -385,5 +385,8 @@ def _svg(fig: Any, salt: str) -> str:
     text = buf.getvalue()
     text = text[text.index("<svg"):]
     text = re.sub(r"<metadata>.*?</metadata>\s*", "", text, flags=re.DOTALL)
+    # matplotlib numbers its groups per figure (axes_1, line2d_3, ...): make them unique in
+    # the page. Nothing refers to them; clip paths and markers have hashed, salted ids.
+    text = re.sub(r'id="([A-Za-z][\w.]*_\d+)"', rf'id="{salt}-\1"', text)
     # Let CSS size the picture: keep the viewBox, drop the fixed width and height in pt.
     return re.sub(r'(<svg[^>]*?) width="[^"]*" height="[^"]*"', r"\1", text, count=1)
