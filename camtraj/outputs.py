@@ -254,7 +254,7 @@ class OutputSet:
             msg = f"cannot write {out.what}: folder {folder} {what}"
             raise InputError(msg) from None
         if not stat.S_ISDIR(st.st_mode):
-            msg = f"cannot write {out.what}: {folder} is not a folder"
+            msg = f"cannot write {out.what}: {folder} is a file, not a folder"
             raise InputError(msg)
         try:
             st = os.stat(out.target)

@@ -157,12 +157,23 @@ def test_write_through_a_symlink_keeps_the_link(tmp_path: Path) -> None:
     assert (tmp_path / "real.mcap").read_bytes() == b"new"
 
 
-def test_missing_folder_is_refused_at_add(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match=r"folder .*nope does not exist"):
-        OutputSet().add(tmp_path / "nope" / "x.mcap", "-o")
+def test_missing_folders_are_made_and_removed_again_when_nothing_is_written(
+    tmp_path: Path,
+) -> None:
+    with OutputSet() as outputs:
+        outputs.add(tmp_path / "new" / "deeper" / "x.mcap", "-o")
+        assert (tmp_path / "new" / "deeper").is_dir()
+    assert list(tmp_path.iterdir()) == []  # the run wrote nothing: no empty folders either
+    with OutputSet() as outputs:
+        outputs.add(tmp_path / "new" / "x.mcap", "-o")
+        outputs.write_bytes(tmp_path / "new" / "x.mcap", b"data")
+        outputs.commit()
+    assert (tmp_path / "new" / "x.mcap").read_bytes() == b"data"
     (tmp_path / "file").write_bytes(b"")
-    with pytest.raises(InputError, match=r"file is not a folder"):
+    with pytest.raises(InputError, match=r"file is a file, not a folder"):
         OutputSet().add(tmp_path / "file" / "x.mcap", "-o")
+    with pytest.raises(InputError, match=r"file is a file, not a folder"):
+        OutputSet().add(tmp_path / "file" / "sub" / "x.mcap", "-o")
 
 
 def test_stale_temporary_files_of_gone_processes_are_removed(tmp_path: Path) -> None:

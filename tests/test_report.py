@@ -86,12 +86,13 @@ class Runs:
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
     d = tmp_path_factory.mktemp("report")
+    (d / "a_file").write_text("a file where a folder should be")
     first = run_all({
         "convert": ["convert", MAYA, "-o", d / "maya.mcap", "--placement", PLACEMENT,
                     "--report", d / "convert.html", "--summary", d / "maya.json", "-q"],
         "whip": ["check", WHIP, "--report", d / "whip.html", "--json"],
         "unreachable": ["check", UNREACHABLE, "--report", d / "unreachable.html", "--json"],
-        "no_folder": ["check", MAYA, "--report", d / "missing" / "r.html"],
+        "no_folder": ["check", MAYA, "--report", d / "a_file" / "r.html"],
         "convert_fails": ["convert", WHIP, "-o", d / "whip.mcap", "--report",
                           d / "whip_convert.html"],
     })
@@ -99,7 +100,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
         "report": ["report", d / "maya.mcap", "-o", d / "report.html"],
         "again": ["report", d / "maya.mcap", "-o", d / "again.html"],
         "not_mcap": ["report", MAYA, "-o", d / "bad.html"],
-        "report_no_folder": ["report", d / "maya.mcap", "-o", d / "missing" / "r.html"],
+        "report_no_folder": ["report", d / "maya.mcap", "-o", d / "a_file" / "r.html"],
     })
     return Runs(d, {**first, **second})
 
@@ -325,11 +326,11 @@ def test_convert_of_an_infeasible_shot_writes_neither_file(runs: Runs) -> None:
 
 
 def test_reports_refuse_bad_input_with_exit_2(runs: Runs) -> None:
-    for key in ("not_mcap", "no_folder", "report_no_folder"):
+    for key in ("not_mcap", "no_folder", "report_no_folder"):  # (missing folders are made)
         proc = runs.procs[key]
         assert proc.returncode == 2, (key, proc.stderr)
         error_line(proc)
-    assert "missing" in error_line(runs.procs["no_folder"])
+    assert "a_file is a file, not a folder" in error_line(runs.procs["no_folder"])
     assert not (runs.folder / "bad.html").exists()
 
 
@@ -415,14 +416,24 @@ def test_report_does_not_slow_the_start_of_convert() -> None:
     assert out.stdout.strip() == "False"
 
 
-def test_write_report_leaves_an_existing_file_when_the_folder_is_missing(tmp_path: Path) -> None:
-    target = tmp_path / "nope" / "r.html"
-    with pytest.raises(InputError, match="does not exist"):
-        rp.write_html(target, "<!DOCTYPE html>")
+def test_write_report_replaces_a_file_atomically_and_refuses_its_source(
+    tmp_path: Path, runs: Runs
+) -> None:
+    mcap = runs.folder / "maya.mcap"
+    data = rp.report_from_mcap(mcap)
+    (tmp_path / "plain").write_text("a file")
+    with pytest.raises(InputError, match="is a file, not a folder"):
+        rp.write_report(tmp_path / "plain" / "r.html", data)
     good = tmp_path / "r.html"
-    rp.write_html(good, "first")
-    rp.write_html(good, "second")
-    assert good.read_text() == "second" and leftovers(tmp_path) == []
+    rp.write_report(good, data)
+    first = good.read_bytes()
+    rp.write_report(good, data)
+    assert good.read_bytes() == first and leftovers(tmp_path) == []
+    copy = tmp_path / "copy.mcap"
+    shutil.copyfile(mcap, copy)
+    with pytest.raises(InputError, match="it is the MCAP the report is made from"):
+        rp.write_report(copy, data, source=copy)
+    assert copy.read_bytes() == mcap.read_bytes()
 
 
 def test_cli_help_lists_the_report(runs: Runs) -> None:

@@ -221,14 +221,22 @@ def test_a_frame_beyond_a_limit_is_still_reported(limits: Limits) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def test_stop_move_range_is_exact(limits: Limits) -> None:
-    from camtraj.timing.edges import _StopMove
+@pytest.mark.parametrize("kind", ["stop", "start"])
+def test_move_range_is_exact(limits: Limits, kind: str) -> None:
+    from camtraj.timing.edges import _Move, _stop_move
 
     rng = np.random.default_rng(3)
+    zero = np.zeros(8)
     for _ in range(20):
+        p = rng.uniform(-1.0, 1.0, 8)
         v = rng.uniform(-1.0, 1.0, 8) * limits.velocity
         a = rng.uniform(-1.0, 1.0, 8) * limits.acceleration
-        move = _StopMove(rng.uniform(-1.0, 1.0, 8), v, a, limits)
+        if kind == "stop":
+            move = _stop_move(p, v, a, limits)
+        else:  # from rest at a start position into the state (p, v / 2, a / 2)
+            start = p + rng.uniform(-0.5, 0.5, 8)
+            move = _Move((start, zero, zero), (p, 0.5 * v, 0.5 * a), limits, stop=False,
+                         what="a test run-up")
         # ruckig's own evaluation on a dense grid: inside the computed range, and reaching
         # it to within what the grid can resolve (an extreme inside a step is where the
         # velocity is zero, so the nearest sample is within a_max * step² / 2 of it).

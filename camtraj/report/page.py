@@ -5,10 +5,8 @@ atomically.
 
 from __future__ import annotations
 
-import contextlib
 import html
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import camtraj
-from camtraj.errors import InputError, frame_ranges
+from camtraj.errors import frame_ranges
 from camtraj.report.data import QUANTITIES, ReportData, fractions
 from camtraj.report.plots import COLORS, figures, limit_text
 

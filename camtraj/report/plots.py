@@ -243,7 +243,7 @@ def _span(data: ReportData, a: int, b: int) -> tuple[float, float]:
     ta = float(np.interp(a, data.frame_numbers, data.frame_times))
     tb = float(np.interp(b, data.frame_numbers, data.frame_times))
     half = 0.5 / data.fps
-    return (ta - half, tb + half) if tb - ta < 2 * half else (ta, tb)
+    return (ta - half, tb + half) if a == b else (ta, tb)
 
 
 def limit_text(data: ReportData, axis: int, quantity: str) -> str:
