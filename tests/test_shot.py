@@ -129,7 +129,7 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
     """
     targets = camera_path(robot, 240)[::24][:8]  # 8 frames, a large move between them
     cost = ShotCost.for_robot(robot, 1.0 / 24.0)
-    cand = candidates(robot, targets, n_track=1, n_extend=2, n_hold=0)
+    cand = candidates(robot, targets, n_track=1, n_extend=2)
     for merged, frames in ((False, 8), (True, 4)):
         unary, pair = chain_costs(cost, cand, merged)
         u, p = unary[:frames], pair[:frames - 1]

@@ -184,7 +184,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`)."""
     s = robot.ik
     cost = ShotCost.for_robot(robot, dt)
-    cand = candidates(robot, targets, s.track_samples, s.extend_samples, s.hold_samples)
+    cand = candidates(robot, targets, s.track_samples, s.extend_samples)
     cand = _rescue_empty_frames(robot, targets, cand, frames)
     choice = choose(cost, cand, start)
     if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
