@@ -77,7 +77,10 @@ def _solve_one(robot: Robot, target: Array, previous: Array, bounds: Bounds) -> 
         return prob
     prob.box_search()
     for axis, limit in prob.binding_axes():
-        prob.boundary_search(axis, limit)
+        # only where the best point found is close to that limit: elsewhere the limit's
+        # boundary is far from the optimum (e.g. a solve from home, elbow on 0 deg)
+        if prob.best_q is None or abs(prob.best_q[axis] - limit) < 0.05:
+            prob.boundary_search(axis, limit)
     return prob
 
 
