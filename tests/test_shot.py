@@ -269,3 +269,10 @@ def test_the_summary_reports_margins_and_the_move_to_start(robot: Robot) -> None
     assert start["extent"]["track"] == pytest.approx(abs(q[0, 0] - 1.0))
     assert start["extent"]["elbow"] == pytest.approx(math.degrees(abs(q[0, 4] + 0.5)))
     assert start["duration_s"] > 0.0
+
+
+def test_a_scaled_target_is_a_value_error_naming_its_index(robot: Robot) -> None:
+    targets = camera_path(robot, 6)
+    targets[4, :3, :3] *= 1.1
+    with pytest.raises(ValueError, match=r"targets\[4\]"):
+        solve_path(robot, targets)
