@@ -103,7 +103,7 @@ class IKSettings:
     limit_margin_prismatic [m], limit_margin_revolute [rad]: the same near position limits.
     motion_weight, velocity_weight, overspeed_weight, acceleration_weight, jerk_weight,
         margin_weight: the weights of the objective's terms.
-    track_samples, extend_samples, hold_samples: the candidate grid (``camtraj.ik.shot``).
+    track_samples, extend_samples: the candidate grid (``camtraj.ik.shot``).
     refine_rounds: most Gauss-Newton steps of the continuous refinement.
     """
 
@@ -120,7 +120,6 @@ class IKSettings:
     margin_weight: float = 10.0
     track_samples: int = 2
     extend_samples: int = 2
-    hold_samples: int = 4
     refine_rounds: int = 6
 
 
@@ -477,7 +476,6 @@ _IK_RANGES: dict[str, tuple[float, float, str]] = {
     "margin_weight": (0.0, 1e4, ""),
     "track_samples": (1, 16, "int"),
     "extend_samples": (1, 16, "int"),
-    "hold_samples": (0, 32, "int"),
     "refine_rounds": (0, 100, "int"),
 }
 

@@ -129,7 +129,7 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
     """
     targets = camera_path(robot, 240)[::24][:8]  # 8 frames, a large move between them
     cost = ShotCost.for_robot(robot, 1.0 / 24.0)
-    cand = candidates(robot, targets, n_track=1, n_extend=2, n_hold=0)
+    cand = candidates(robot, targets, n_track=1, n_extend=2)
     for merged, frames in ((False, 8), (True, 4)):
         unary, pair = chain_costs(cost, cand, merged)
         u, p = unary[:frames], pair[:frames - 1]
@@ -269,3 +269,10 @@ def test_the_summary_reports_margins_and_the_move_to_start(robot: Robot) -> None
     assert start["extent"]["track"] == pytest.approx(abs(q[0, 0] - 1.0))
     assert start["extent"]["elbow"] == pytest.approx(math.degrees(abs(q[0, 4] + 0.5)))
     assert start["duration_s"] > 0.0
+
+
+def test_a_scaled_target_is_a_value_error_naming_its_index(robot: Robot) -> None:
+    targets = camera_path(robot, 6)
+    targets[4, :3, :3] *= 1.1
+    with pytest.raises(ValueError, match=r"targets\[4\]"):
+        solve_path(robot, targets)

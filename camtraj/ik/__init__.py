@@ -4,8 +4,9 @@ Modules, from the core out:
 
 * :mod:`~camtraj.ik.closed_form`: the six axes in closed form for fixed track and extend;
 * :mod:`~camtraj.ik.region`: the analytic feasible region of (track, extend);
-* :mod:`~camtraj.ik.sm`: the SM method's per-frame optimum of the papers' weighted motion F
-  (the ``paper`` objective) and the dense traversal that checks it;
+* :mod:`~camtraj.ik.sm`, :mod:`~camtraj.ik.sm_search`: the SM method's per-frame optimum of
+  the papers' weighted motion F (the ``paper`` objective) and the dense traversal that checks
+  it;
 * :mod:`~camtraj.ik.shot_cost`, :mod:`~camtraj.ik.shot`, :mod:`~camtraj.ik.refine`: the
   whole-shot solver (the ``shot`` objective, the default): candidates, dynamic programme,
   continuous refinement;

@@ -15,7 +15,7 @@ from camtraj.ik.margins import PathMargins, path_margins
 from camtraj.ik.refine import refine
 from camtraj.ik.shot import Candidates, candidates, choose, measures
 from camtraj.ik.shot_cost import ShotCost
-from camtraj.ik.sm import check_joints, check_target, solve_ik
+from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.robot import Robot
 
 Array = NDArray[np.float64]
@@ -149,12 +149,15 @@ def _check_targets(targets: ArrayLike) -> Array:
     if bad.size:
         msg = f"targets must be finite poses: target {int(bad[0])} contains NaN or infinity"
         raise ValueError(msg)
-    for i in range(0, Ts.shape[0], max(1, Ts.shape[0] // 16)):
-        try:
-            check_target(Ts[i])
-        except ValueError as exc:
-            msg = f"targets[{i}]: {exc}"
-            raise ValueError(msg) from None
+    R = Ts[:, :3, :3]
+    gram = np.einsum("nji,njk->nik", R, R)
+    # orthonormal (as np.allclose(R.T @ R, I, atol=1e-6)) and not mirrored (det > 0)
+    bad = np.flatnonzero((np.abs(gram - np.eye(3)) > 1e-6 + 1e-5 * np.eye(3)).any(axis=(1, 2))
+                         | (np.linalg.det(R) < 0))
+    if bad.size:
+        msg = (f"targets[{int(bad[0])}]: its rotation is not a proper rotation matrix (scaled, "
+               f"sheared or mirrored)")
+        raise ValueError(msg)
     return Ts
 
 
@@ -184,7 +187,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`)."""
     s = robot.ik
     cost = ShotCost.for_robot(robot, dt)
-    cand = candidates(robot, targets, s.track_samples, s.extend_samples, s.hold_samples)
+    cand = candidates(robot, targets, s.track_samples, s.extend_samples)
     cand = _rescue_empty_frames(robot, targets, cand, frames)
     choice = choose(cost, cand, start)
     if choice is None:  # pragma: no cover - every frame has a feasible candidate by now

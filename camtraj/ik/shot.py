@@ -70,8 +70,7 @@ class Candidates:
     track_hi: Array
 
 
-def candidates(robot: Robot, targets: Array, n_track: int = 3, n_extend: int = 2,
-               n_hold: int = 4) -> Candidates:
+def candidates(robot: Robot, targets: Array, n_track: int = 2, n_extend: int = 2) -> Candidates:
     """Candidate points per frame over the feasible region, solved on every branch.
 
     Args:
@@ -80,12 +79,9 @@ def candidates(robot: Robot, targets: Array, n_track: int = 3, n_extend: int = 2
         n_track: Track values per reachable interval, at the middles of equal parts (they move
             with the region from frame to frame).
         n_extend: Extend values per track value, likewise over its reach interval.
-        n_hold: Track values shared by every frame, spread over the whole shot's reachable
-            track range (a track held still through the shot is a candidate path); where one
-            lies outside a frame's intervals it is not a candidate there.
 
-    The G = (2 n_track + n_hold) n_extend points of a frame are in a fixed order, so point g of
-    one frame and of the next are "the same place" in the region.
+    The G = 2 n_track n_extend points of a frame are in a fixed order, so point g of one frame
+    and of the next are "the same place" in the region.
     """
     n = targets.shape[0]
     wrist = targets[:, :3, 3]
@@ -96,15 +92,9 @@ def candidates(robot: Robot, targets: Array, n_track: int = 3, n_extend: int = 2
     span1 = np.where(reach, hi1 - lo1, 0.0)
     u1 = (np.arange(n_track) + 0.5) / n_track
     r1 = np.where(reach[..., None], lo1[..., None] + span1[..., None] * u1, 0.0)  # (n, 2, k)
-    iv = np.broadcast_to(np.arange(2)[None, :, None], r1.shape)
-    ok1 = np.broadcast_to(reach[..., None], r1.shape)
-    if n_hold > 0 and reach.any():
-        held = _held_track(lo1, hi1, n_hold)
-        inside = (lo1[:, :, None] <= held) & (held <= hi1[:, :, None])  # (n, 2, h)
-        r1 = np.concatenate([r1.reshape(n, -1), np.broadcast_to(held, (n, n_hold))], axis=1)
-        iv = np.concatenate([iv.reshape(n, -1), np.argmax(inside, axis=1)], axis=1)
-        ok1 = np.concatenate([ok1.reshape(n, -1), inside.any(axis=1)], axis=1)
-    r1, iv, ok1 = r1.reshape(n, -1), iv.reshape(n, -1), ok1.reshape(n, -1)
+    iv = np.broadcast_to(np.arange(2)[None, :, None], r1.shape).reshape(n, -1)
+    ok1 = np.broadcast_to(reach[..., None], r1.shape).reshape(n, -1)
+    r1 = r1.reshape(n, -1)
     region = Region(robot.dh, wrist.T[:, :, None], -math.inf, math.inf,
                     float(robot.lower[EXTEND]), float(robot.upper[EXTEND]), 0.0)
     lo4, hi4 = region.r4_interval(r1)  # (n, m)
@@ -123,23 +113,6 @@ def candidates(robot: Robot, targets: Array, n_track: int = 3, n_extend: int = 2
     ok = ok.reshape(*shape, N_BRANCHES) & valid_g[..., None]
     return Candidates(np.ascontiguousarray(r1g), r4g, np.ascontiguousarray(interval), y, ok,
                       lo1, hi1)
-
-
-def _held_track(lo1: Array, hi1: Array, n_hold: int) -> Array:
-    """Track values to hold through the shot: first inside the part of a track interval that
-    every frame shares (two per interval where there is one), then spread over the union."""
-    out: list[float] = []
-    for j in range(2):
-        ok = lo1[:, j] <= hi1[:, j]
-        if ok.all() and len(out) + 2 <= n_hold:
-            a, b = float(lo1[:, j].max()), float(hi1[:, j].min())
-            if a <= b:
-                out += [a + 0.25 * (b - a), a + 0.75 * (b - a)]
-    reach = lo1 <= hi1
-    a, b = float(lo1[reach].min()), float(hi1[reach].max())
-    rest = n_hold - len(out)
-    out += list(a + (b - a) * (np.arange(rest) + 0.5) / max(rest, 1))
-    return np.array(out[:n_hold])
 
 
 def measures(robot: Robot, targets: Array, r1: Array, r4: Array,
