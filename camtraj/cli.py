@@ -7,13 +7,14 @@ Errors are printed as one ``ERROR:`` line naming the frames, axes and margins; n
 from __future__ import annotations
 
 import contextlib
+import importlib
 import logging
 import logging.handlers
 import math
 import os
 import sys
 import warnings
-from typing import Any, NoReturn
+from typing import Any, ClassVar, NoReturn
 
 import click
 
@@ -22,7 +23,6 @@ from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
 from camtraj.errors import CamtrajError, CollisionError, InputError, UnreachableFramesError
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
-from camtraj.place import place_command
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 
@@ -65,7 +65,23 @@ def stopped(exc: KeyboardInterrupt, command: str | None = None) -> NoReturn:
 
 
 class _Main(click.Group):
-    """The ``camtraj`` group: a stop by signal or a failing standard output is one line."""
+    """The ``camtraj`` group: a stop by signal or a failing standard output is one line.
+
+    Commands in :attr:`LAZY` are imported only when they run (or ``--help`` lists them), so
+    ``convert`` does not pay for the placement search's imports.
+    """
+
+    LAZY: ClassVar[dict[str, tuple[str, str]]] = {"place": ("camtraj.place", "place_command")}
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*super().list_commands(ctx), *self.LAZY})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in self.LAZY:
+            module, name = self.LAZY[cmd_name]
+            command: click.Command = getattr(importlib.import_module(module), name)
+            return command
+        return super().get_command(ctx, cmd_name)
 
     def invoke(self, ctx: click.Context) -> Any:
         ok = False
@@ -318,7 +334,6 @@ def report_command(mcap_file: str, output: str) -> None:
 
 
 main.add_command(batch_command, "batch")
-main.add_command(place_command, "place")
 try:  # the farm commands need nothing optional until they run
     from camtraj.farm import farm_group
 
