@@ -217,9 +217,9 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
-    if os.path.splitext(output)[1].lower() != ".mcap":
-        click.echo(f"warning: -o {output} does not end in .mcap; it will be an MCAP file "
-                   "all the same", err=True)
+    if os.path.splitext(output)[1].lower() != ".mcap":  # held: shown only if the run succeeds
+        logging.getLogger("camtraj").warning(
+            "-o %s does not end in .mcap; it will be an MCAP file all the same", output)
     progress = _progress(shot, _progress_wanted(quiet))
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from camtraj.convert import convert as run

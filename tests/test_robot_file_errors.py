@@ -259,7 +259,9 @@ def test_convert_starts_the_take_at_the_given_vector(tmp_path: Path) -> None:
     out = tmp_path / "crane.mcap"
     proc = run_cli("convert", CRANE, "-o", out, "--start-from", text, "--frames", "1:24")
     assert proc.returncode == 0, proc.stderr
-    track_runup = re.search(r"^  track .* (\d+\.\d+)\s+\d+\.\d+ m$", proc.stdout, re.M)
+    # the track row: position velocity accel jerk run-up run-out unit margin to-start
+    track_runup = re.search(r"^  track .* (\d+\.\d+)\s+\d+\.\d+ m\s+\S+\s+\S+$", proc.stdout,
+                            re.M)
     assert track_runup and float(track_runup[1]) > 0.1, proc.stdout
     with out.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])

@@ -270,10 +270,13 @@ def test_foxglove_layout_is_written_beside_the_mcap(tmp_path: Path) -> None:
     topics = {c.topic for c in summary.channels.values()}
     named = {*three_d["topics"], "/shot/frames", "/joint_states"}
     assert named <= topics
-    # A bad layout path fails before converting, and leaves nothing.
+    # A bad layout path (a file where its folder should be) fails before converting, and
+    # leaves nothing.
+    (tmp_path / "a_file").write_text("not a folder")
     bad = subprocess.run(
         [sys.executable, "-m", "camtraj", "convert", str(SHOTS / "maya_dolly_push_in.usda"),
-         "-o", str(tmp_path / "b.mcap"), "--foxglove-layout", str(tmp_path / "no" / "x.json")],
+         "-o", str(tmp_path / "b.mcap"), "--foxglove-layout",
+         str(tmp_path / "a_file" / "x.json")],
         capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert bad.returncode == 2

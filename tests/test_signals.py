@@ -129,8 +129,9 @@ class Run:
 
 
 def _ik_progress(text: str) -> bool:
-    """The bar shows n of N frames, 0 < n < N."""
-    return any(0 < int(n) < int(total) for n, total in re.findall(r"(\d+)/(\d+)", text))
+    """The status line names the solve stage (drawn as the stage starts; the whole-shot
+    solver reports its frames at once when it is done, so no partial count is ever shown)."""
+    return ": solve" in text and ": time" not in text
 
 
 def _moment(run: Run, moment: str) -> None:
