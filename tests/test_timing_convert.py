@@ -3,11 +3,9 @@ end in motion, and the servo stream read back from the written MCAP by the mcap 
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -18,27 +16,17 @@ from camtraj.options import ConvertOptions
 from camtraj.robot import Robot
 from camtraj.timing import Limits
 
+from .shot_set import make_samples
+
 Array = NDArray[np.float64]
 SHOTS = Path(__file__).resolve().parents[1] / "samples" / "shots"
 SLACK = 1e-3
 
 
-def _make_samples() -> ModuleType:
-    name = "camtraj_samples_make_samples"
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, SHOTS / "make_samples.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def write_track_move(path: Path, seconds: float, speed: float, tilt_rate: float) -> Path:
     """A camera moving along the track at constant ``speed`` [m/s] with a slow tilt
     [deg/s], in motion from the first frame to the last (Z-up metres, 24 fps)."""
-    ms = _make_samples()
+    ms = make_samples()
     frames = np.arange(1, int(seconds * 24) + 2, dtype=np.float64)
     t = (frames - 1) / 24.0
     pos = np.stack([4.0 + speed * t, np.full_like(t, 1.0), np.full_like(t, 1.0)], axis=1)
