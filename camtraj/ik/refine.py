@@ -32,7 +32,7 @@ IntArray = NDArray[np.intp]
 _H = 1e-6  # [m] central-difference step of the Jacobian
 _STENCILS = ((1, np.array([-1.0, 1.0])), (2, np.array([1.0, -2.0, 1.0])),
              (3, np.array([-1.0, 3.0, -3.0, 1.0])))
-_BAND = 7  # super-diagonals of the normal matrix (third differences, two variables a frame)
+_GROUP = 4  # frames per block of the normal matrix (frames couple at most 3 apart)
 
 
 @dataclass
@@ -209,22 +209,59 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
 
 
 def _solve_banded(H: list[Array], g: Array, mu: float) -> Array:
-    """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step."""
-    from scipy.linalg import solveh_banded
+    """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step.
 
+    ``H[d][i]`` is the 2x2 block coupling frame i with frame i + d (d = 0..3; the d = 0 blocks
+    are symmetric). Grouping four frames makes the matrix block tridiagonal (8x8 blocks:
+    frames couple at most three apart), solved by block elimination (the symmetric positive
+    definite block Thomas algorithm): a few small numpy calls per group, and no scipy import
+    on the first solve of a process (which costs more than every later solve together).
+    """
     n = g.shape[0]
-    ab = np.zeros((_BAND + 1, 2 * n))
+    groups = -(-n // _GROUP)
+    m = groups * _GROUP  # frames, padded with unit rows (step 0) to whole groups
+    diag_blocks = np.zeros((groups, 2 * _GROUP, 2 * _GROUP))
+    upper_blocks = np.zeros((groups, 2 * _GROUP, 2 * _GROUP))
     for d, blk in enumerate(H):
+        i = np.arange(n - d)
+        j = i + d
+        gi, gj = i // _GROUP, j // _GROUP
+        ri, cj = 2 * (i % _GROUP), 2 * (j % _GROUP)
         for r in range(2):
             for s in range(2):
-                if d == 0 and r > s:
-                    continue
-                cols = 2 * (np.arange(n - d) + d) + s
-                ab[_BAND + r - s - 2 * d, cols] = blk[: n - d, r, s]
-    diag = ab[_BAND].copy()
-    ab[_BAND] = diag * (1.0 + mu) + 1e-9 * max(float(diag.max()), 1e-12) + 1e-12
-    step = solveh_banded(ab, -g.ravel(), check_finite=False)
-    return np.asarray(step).reshape(n, 2)
+                vals = blk[: n - d, r, s]
+                same = gi == gj
+                np.add.at(diag_blocks, (gi[same], ri[same] + r, cj[same] + s), vals[same])
+                if d > 0:  # the lower triangle of a diagonal block, by symmetry
+                    np.add.at(diag_blocks, (gi[same], cj[same] + s, ri[same] + r), vals[same])
+                    nxt = ~same
+                    np.add.at(upper_blocks, (gi[nxt], ri[nxt] + r, cj[nxt] + s), vals[nxt])
+    size = 2 * _GROUP
+    eye = np.arange(size)
+    diag = diag_blocks[:, eye, eye].reshape(-1)[: 2 * n]
+    shift = 1e-9 * max(float(diag.max()), 1e-12) + 1e-12
+    damped = diag_blocks[:, eye, eye] * (1.0 + mu) + shift
+    pad = np.arange(2 * n, 2 * m)
+    damped.reshape(-1)[pad] = 1.0  # padding unknowns: 1 * step = 0
+    diag_blocks[:, eye, eye] = damped
+    rhs = np.zeros(2 * m)
+    rhs[: 2 * n] = -g.ravel()
+    b = rhs.reshape(groups, size)
+    w = np.zeros_like(upper_blocks)  # C_k^-1 U_k
+    z = np.zeros_like(b)  # C_k^-1 y_k
+    c_k, y_k = diag_blocks[0], b[0]
+    for k in range(groups):
+        if k > 0:
+            u_t = upper_blocks[k - 1].T
+            c_k = diag_blocks[k] - u_t @ w[k - 1]
+            y_k = b[k] - u_t @ z[k - 1]
+        sol = np.linalg.solve(c_k, np.column_stack([upper_blocks[k], y_k]))
+        w[k], z[k] = sol[:, :size], sol[:, size]
+    x = np.empty_like(b)
+    x[-1] = z[-1]
+    for k in range(groups - 2, -1, -1):
+        x[k] = z[k] - w[k] @ x[k + 1]
+    return x.reshape(-1)[: 2 * n].reshape(n, 2)
 
 
 __all__ = ["Refined", "refine"]
