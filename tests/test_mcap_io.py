@@ -679,14 +679,11 @@ def test_quaternions_random_and_near_half_turns() -> None:
 
 
 def test_one_minute_take(tmp_path: Path) -> None:
-    """15,000 servo samples at 250 Hz and 1440 frames: written fast, trajectory decodes."""
+    """15,000 servo samples at 250 Hz and 1440 frames: the trajectory decodes whole (how fast
+    it is written is make bench's business, not a test's)."""
     take = make_take(seed=11, m=15_000, n=1440, first_frame_time=0.0)
     path = tmp_path / "minute.mcap"
-    write_take(path, take, ROBOT, METADATA)  # warm-up (imports, caches)
-    start = time.perf_counter()
     write_take(path, take, ROBOT, METADATA)
-    elapsed = time.perf_counter() - start
-    assert elapsed < 2.0  # target < 0.5 s on a workstation; loose here against CI noise
     with path.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         [(_s, _c, _m, traj)] = list(reader.iter_decoded_messages(topics=["/joint_trajectory"]))

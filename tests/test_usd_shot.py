@@ -6,7 +6,6 @@ import importlib.util
 import logging
 import math
 import sys
-import time
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -596,13 +595,9 @@ def test_unreachable_sample_leaves_reach_only_mid_shot() -> None:
     np.testing.assert_allclose(pos[(shot.frames >= 30) & (shot.frames <= 45), 1], 7.0)
 
 
-def test_long_shot_reads_fast_and_is_realistic(tmp_path: Path) -> None:
+def test_long_shot_is_realistic(tmp_path: Path) -> None:
     path = make_samples.write_long_shot(tmp_path / "long.usda", n_frames=1440, fps=24)
-    read_shot(SHOTS / "whip_pan.usda")  # warm up USD's plugins
-    start = time.perf_counter()
-    shot = read_shot(path)
-    elapsed = time.perf_counter() - start
-    assert elapsed < 0.5
+    shot = read_shot(path)  # (its read time is in make bench, not in a test)
     assert shot.n_frames == 1440
     assert shot.times[-1] == pytest.approx(1439 / 24)
     _assert_realistic(shot)
