@@ -21,7 +21,6 @@ Run it alone with ``python bench/bench_place.py``.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import subprocess
@@ -37,15 +36,11 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _make_samples() -> object:
-    name = "camtraj_make_samples"
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, ROOT / "samples/shots/make_samples.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
+    """``samples/shots/make_samples.py`` as a module (the tests' loader)."""
+    sys.path.insert(0, str(ROOT))
+    from tests.shot_set import make_samples
+
+    return make_samples()
 
 
 def _far_shot(path: Path, frames: int) -> np.ndarray:

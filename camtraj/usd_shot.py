@@ -434,17 +434,21 @@ def _meters_per_unit(stage: Any, path: Path) -> float:
         logger.warning(
             "%s: metersPerUnit is not authored; using USD's fallback 0.01 (centimetres)", path
         )
-    value = _metadata_number(
-        stage, "metersPerUnit", lambda: UsdGeom.GetStageMetersPerUnit(stage)
-    )
+    return _positive_metadata(stage, path, "metersPerUnit",
+                              lambda: UsdGeom.GetStageMetersPerUnit(stage))
+
+
+def _positive_metadata(stage: Any, path: Path, key: str, typed_get: Any) -> float:
+    """A stage metadatum that must be a finite positive number (of any numeric type)."""
+    value = _metadata_number(stage, key, typed_get)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        msg = f"{path}: metersPerUnit must be a number, not {value!r}"
+        msg = f"{path}: {key} must be a number, not {value!r}"
         raise ShotFileError(msg)
-    meters_per_unit = float(value)
-    if not (math.isfinite(meters_per_unit) and meters_per_unit > 0.0):
-        msg = f"{path}: metersPerUnit must be a positive number, not {meters_per_unit}"
+    number = float(value)
+    if not (math.isfinite(number) and number > 0.0):
+        msg = f"{path}: {key} must be a positive number, not {number}"
         raise ShotFileError(msg)
-    return meters_per_unit
+    return number
 
 
 def _rate(stage: Any, path: Path, key: str, typed_get: Any) -> Fraction:
@@ -454,14 +458,7 @@ def _rate(stage: Any, path: Path, key: str, typed_get: Any) -> Fraction:
     23.976, 29.97, 59.94 or in full) becomes that fraction, so a stage that spells the same
     rate two ways samples every frame; anything else is taken exactly as written.
     """
-    value = _metadata_number(stage, key, typed_get)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        msg = f"{path}: {key} must be a number, not {value!r}"
-        raise ShotFileError(msg)
-    rate = float(value)
-    if not (math.isfinite(rate) and rate > 0.0):
-        msg = f"{path}: {key} must be a positive number, not {rate}"
-        raise ShotFileError(msg)
+    rate = _positive_metadata(stage, path, key, typed_get)
     whole = round(rate)
     if whole >= 1 and abs(rate - whole) <= 1e-9 * rate:
         return Fraction(whole)
