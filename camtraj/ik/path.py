@@ -17,6 +17,7 @@ from camtraj.ik.shot import Candidates, candidates, choose, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.robot import Robot
+from camtraj.timing import Limits, TimingLimitError, time_shot
 
 Array = NDArray[np.float64]
 
@@ -198,8 +199,20 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
     j = cand.interval[rows, choice.point]
     lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
+    limits = Limits.from_robot(robot)
+    times = np.arange(n) * dt
+
+    def take_speed(q: Array) -> float:
+        try:
+            return time_shot(q, times, limits, mode="shot").report.max_speed
+        except TimingLimitError as exc:
+            return exc.max_speed if math.isfinite(exc.max_speed) else 0.0
+        except ValueError:  # fewer than two frames
+            return math.inf
+
     ref = refine(robot, cost, targets, choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
-                 np.maximum(hi1, x0[:, 0]), rounds=s.refine_rounds)
+                 np.maximum(hi1, x0[:, 0]), rounds=max(25, s.refine_rounds),
+                 take_speed=take_speed)
     return ref.y[:, :8]
 
 

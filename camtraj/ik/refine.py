@@ -15,7 +15,8 @@ exact objective drops, so the result is never worse than its start.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,16 +24,14 @@ from numpy.typing import NDArray
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
-from camtraj.ik.shot_cost import N_MEASURES, ShotCost
+from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost
 from camtraj.robot import Robot
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 _H = 1e-6  # [m] central-difference step of the Jacobian
-_STENCILS = ((1, np.array([-1.0, 1.0])), (2, np.array([1.0, -2.0, 1.0])),
-             (3, np.array([-1.0, 3.0, -3.0, 1.0])))
-_GROUP = 4  # frames per block of the normal matrix (frames couple at most 3 apart)
+_POWERS = (6.0, 12.0, 24.0, 48.0)  # the peak norm's continuation
 
 
 @dataclass
@@ -61,172 +60,256 @@ class _Corridor:
 
 
 def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
-           y0: Array, lo1: Array, hi1: Array, rounds: int = 6) -> Refined:
-    """Lower the shot objective from the start curves x0 (n, 2), measures y0 (n, 10).
+           y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
+           tolerance: float = 1e-4,
+           take_speed: Callable[[Array], float] | None = None) -> Refined:
+    """Lower the take's peak use from the start curves x0 (n, 2), measures y0 (n, 10).
+
+    A continuation over the power of :meth:`ShotCost.peak_norm` (6, 12, 24, 48): each stage
+    starts from the last one's answer with the scale set to its peak use, and runs damped
+    Gauss-Newton steps until a step lowers the stage's objective by less than ``tolerance``
+    (relative), or after ``rounds`` steps.
 
     Args:
         robot: The robot.
-        cost: The objective.
+        cost: The objective (its ``power`` and ``scale`` are set here).
         targets: Flange poses (n, 4, 4) [m].
         branch: Closed-form branch per frame (n,).
         x0: Start track/extend per frame (n, 2) [m], feasible.
         y0: Its measures (n, 10), joints continuous.
         lo1, hi1: The track interval each frame stays in (n,) [m].
-        rounds: Most Gauss-Newton steps (up to four times as many while a step between frames
-            still exceeds a velocity limit).
+        rounds: Most Gauss-Newton steps per stage.
+        tolerance: Relative decrease below which a stage has converged.
+        take_speed: The maximum feasible speed of a joint path (n, 8) as the timing stage
+            finds it; the start and every stage's answer are measured with it and the fastest
+            is returned (default: ``1 / cost.peak``, the objective's own model).
     """
     n = x0.shape[0]
-    corridor = _Corridor(robot, targets, lo1, hi1)
     x, y = x0.copy(), y0.copy()
-    j = cost.total(y)
-    mu = 1e-3
-    taken = 0
+    final = replace(cost, power=_POWERS[-1], scale=max(cost.peak(y[:, :8]), 1e-6))
     if n < 2:
-        return Refined(x, y, j, 0)
+        return Refined(x, y, final.refine_total(y), 0)
+    corridor = _Corridor(robot, targets, lo1, hi1)
+    speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
+    taken = 0
+    best = (speed(y[:, :8]), x, y)
+    for power in _POWERS:
+        stage = replace(cost, power=power, scale=max(cost.peak(y[:, :8]), 1e-6))
+        x, y, steps = _descend(robot, stage, corridor, targets, branch, x, y, rounds,
+                               tolerance)
+        taken += steps
+        v = speed(y[:, :8])
+        if v >= best[0]:
+            best = (v, x, y)
+    _, x, y = best
+    return Refined(x.copy(), y.copy(), final.refine_total(y), taken)
+
+
+def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
+             branch: IntArray, x: Array, y: Array, rounds: int,
+             tolerance: float) -> tuple[Array, Array, int]:
+    """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged."""
+    n = x.shape[0]
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
-    rel = 0.0
-    for rnd in range(4 * rounds):
-        # measures at x + h e_track and x + h e_extend (x itself is known), one closed-form
-        # call; a side the closed form cannot solve (a corridor edge) is taken backwards
-        grad_y = np.zeros((n, N_MEASURES, 2))
-        side = np.ones((n, 2))
-        for _attempt in range(2):
-            pts = np.concatenate([x, x + [_H, 0] * side[:, :1], x + [0, _H] * side[:, 1:]])
-            prev = np.concatenate([y[:, :8]] * 3)
-            ya, oka = branch_measures(robot, targets3, pts[:, 0], pts[:, 1], prev, b3)
-            ys = ya.reshape(3, n, N_MEASURES)
-            oks = oka.reshape(3, n)
-            for v in range(2):
-                good = oks[v + 1][:, None]
-                grad_y[:, :, v] = np.where(good, (ys[v + 1] - y) / (_H * side[:, v:v + 1]),
-                                           grad_y[:, :, v])
-            bad = ~oks[1:].T  # (n, 2)
-            if not bad.any() or _attempt:
-                break
-            side = np.where(bad, -1.0, side)
+    j = cost.refine_total(y)
+    mu = 1e-3
+    taken = 0
+    slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
+    for _ in range(rounds):
+        grad_y = _jacobian(robot, targets3, b3, x, y)
         H, g = _normal_equations(cost, y, grad_y)
         improved = False
-        for _try in range(6):
+        for _try in range(10):
             step = _solve_banded(H, g, mu)
             xn = corridor.project(x + step)
             yn, keep = branch_measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8], branch)
+            keep &= ~_folded(yn, y)
             xn = np.where(keep[:, None], xn, x)
             yn = np.where(keep[:, None], yn, y)
-            jn = cost.total(yn)
+            jn = cost.refine_total(yn)
             if jn < j:
                 improved = True
                 rel = (j - jn) / max(abs(j), 1e-300)
                 x, y, j = xn, yn, jn
-                mu = max(mu / 3.0, 1e-9)
+                mu = max(mu / 4.0, 1e-9)
                 break
-            mu *= 10.0
+            mu *= 8.0
         taken += 1
         if not improved:
             break
-        # beyond ``rounds`` only while a step still exceeds a velocity limit (up to 4x as many)
-        fast = bool(np.any(np.abs(np.diff(y[:, :8], axis=0)) > cost.vel))
-        if rel < 1e-4 or (rnd + 1 >= rounds and not fast):
+        slow = slow + 1 if rel < tolerance else 0
+        if slow >= 3:
             break
-    return Refined(x, y, j, taken)
+    return x, y, taken
+
+
+def _folded(ya: Array, yb: Array) -> NDArray[np.bool_]:
+    """Frames (n,) where a revolute axis moved by more than a quarter turn between two
+    measure sets of the same frames: folded back inside its limits by whole turns (or over
+    the wrist singularity), not moved."""
+    return np.asarray((np.abs(ya[:, :8] - yb[:, :8]) > 0.5 * np.pi).any(axis=1))
+
+
+def _jacobian(robot: Robot, targets3: Array, b3: IntArray, x: Array, y: Array) -> Array:
+    """d measures / d (track, extend) per frame (n, 10, 2), by one-sided differences of the
+    closed form (all frames in one call); a side the closed form cannot solve (a corridor
+    edge) is taken backwards."""
+    n = x.shape[0]
+    grad_y = np.zeros((n, N_MEASURES, 2))
+    side = np.ones((n, 2))
+    for attempt in range(2):
+        pts = np.concatenate([x, x + [_H, 0] * side[:, :1], x + [0, _H] * side[:, 1:]])
+        prev = np.concatenate([y[:, :8]] * 3)
+        ya, oka = branch_measures(robot, targets3, pts[:, 0], pts[:, 1], prev, b3)
+        ys = ya.reshape(3, n, N_MEASURES)
+        oks = oka.reshape(3, n)
+        for v in range(2):
+            good = (oks[v + 1] & ~_folded(ys[v + 1], y))[:, None]
+            grad_y[:, :, v] = np.where(good, (ys[v + 1] - y) / (_H * side[:, v:v + 1]),
+                                       grad_y[:, :, v])
+        bad = ~(oks[1:] & ~np.stack([_folded(ys[1], y), _folded(ys[2], y)])).T  # (n, 2)
+        if not bad.any() or attempt:
+            break
+        side = np.where(bad, -1.0, side)
+    return grad_y
 
 
 def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Array], Array]:
-    """Gauss-Newton normal matrix (as 2 x 2 blocks on block diagonals 0..3) and gradient.
+    """Gauss-Newton normal matrix (as 2 x 2 blocks on block diagonals 0..3) and gradient of
+    ``cost.refine_total``.
 
     The difference terms are first gathered per axis in the joints: ``M[d][p, i]`` is the
     curvature coupling frames p and p + d through axis i, ``gq`` the gradient in the joints;
-    then the chain rule through the per-frame Jacobians (n, 10, 2) gives the blocks.
+    then the chain rule through the per-frame Jacobians (n, 10, 2) gives the blocks. The peak
+    norm T = s (sum f)^(1/p), f = (|z| / s^k)^(p/k) for order k, enters through its
+    Gauss-Newton model (the concave outer power dropped: the model overestimates curvature);
+    the L1 motion tie-break through its majorising quadratic; margin hinges through their
+    active sets.
     """
     n = y.shape[0]
-    H = [np.zeros((n, 2, 2)) for _ in range(4)]
-    M = [np.zeros((n, 8)) for _ in range(4)]
-    gq = np.zeros((n, 8))
     q, G = y[:, :8], grad_y[:, :8, :]
-    for order, stencil in _STENCILS:
-        m = n - order
-        if m <= 0:
-            continue
-        if order == 1:
-            z = np.diff(q, axis=0) / cost.vel
-            a = np.abs(z)
-            over = np.maximum(a - 1.0, 0.0)
-            sign = np.sign(z)
-            dz = 2 * cost.velocity * z + 2 * cost.overspeed * over * sign + cost.motion_coef * sign
-            ddz = (2 * cost.velocity + 2 * cost.overspeed * (over > 0)
-                   + cost.motion_coef / np.maximum(a, 0.05))
-            scale = cost.vel
-        elif order == 2:
-            z = np.diff(q, 2, axis=0) / cost.acc
-            dz, ddz = 2 * cost.acceleration * z, np.full_like(z, 2 * cost.acceleration)
-            scale = cost.acc
-        else:
-            z = np.diff(q, 3, axis=0) / cost.jerk
-            dz, ddz = 2 * cost.jerk_weight * z, np.full_like(z, 2 * cost.jerk_weight)
-            scale = cost.jerk
-        dz, w = dz / scale, ddz / (scale * scale)
-        for ia, ca in enumerate(stencil):
-            gq[ia:ia + m] += ca * dz
-            for ib in range(ia, stencil.size):
-                M[ib - ia][ia:ia + m] += (ca * stencil[ib]) * w
-    g = np.einsum("ki,kip->kp", gq, G)
-    for d in range(4):
-        if n - d <= 0:
-            continue
-        Ga, Gb = M[d][: n - d, :, None] * G[: n - d], G[d:]
-        H[d][: n - d] = np.einsum("kip,kiq->kpq", Ga, Gb)
+    p, s = cost.power, cost.scale
+    usages = cost.usages(q)
+    width = max(op.coef.shape[1] for op, _ in usages)
+    pad = width  # frames of padding on either side of the gathered arrays
+    M = np.zeros((width, n + 2 * pad, 8))  # M[d, pad + f]: curvature coupling f and f + d
+    gq = np.zeros((n + 2 * pad, 8))
+    phi = cost.peak_sum(q)
+    kappa = (s / p) * max(phi, 1e-300) ** (1.0 / p - 1.0)
+    lims = (cost.vel, cost.acc, cost.jerk)
+    for op, z in usages:
+        e = p / op.order
+        c = s ** op.order
+        a = np.abs(z) / c
+        lim = lims[op.order - 1]
+        dz = kappa * e * a ** (e - 1.0) * np.sign(z) / (c * lim)
+        w = kappa * e * (e - 1.0) * a ** (e - 2.0) / (c * c * lim * lim)
+        _gather(op.coef, op.offset, dz, w, gq, M, pad)
+    if n >= 3:  # the ends' stopping needs: one row per end and axis
+        need, d1, d2, rows = cost.edge_needs(q)
+        a = need / s
+        f1 = kappa * p * a ** (p - 1.0) / s
+        f2 = kappa * p * (p - 1.0) * a ** (p - 2.0) / (s * s)
+        off = usages[0][0].offset
+        for end, row in ((0, 0), (1, n - 1)):
+            # d need / d q[f] per axis: (width, 8)
+            lin = (rows[end, 0][:, None] * (d1[end] / cost.vel)
+                   + rows[end, 1][:, None] * (d2[end] / cost.acc))
+            lo = pad + row + off
+            gq[lo:lo + lin.shape[0]] += lin * f1[end]
+            for o1 in range(lin.shape[0]):
+                for o2 in range(o1, lin.shape[0]):
+                    M[o2 - o1, lo + o1] += lin[o1] * lin[o2] * f2[end]
+    m = n - 1  # the motion tie-break, mean over steps, through its majorising quadratic
+    if m > 0:
+        z = np.diff(q, axis=0) / cost.vel
+        t = cost.tie_break / m
+        dz = t * cost.motion_coef * np.sign(z) / cost.vel
+        w = t * cost.motion_coef / np.maximum(np.abs(z), 0.05) / (cost.vel * cost.vel)
+        _gather(np.tile([-1.0, 1.0], (m, 1)), 0, dz, w, gq, M, pad)
+    g = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
+    H = []
+    for d in range(width):
+        blk = np.zeros((n, 2, 2))
+        if n - d > 0:
+            Ga = M[d, pad:pad + n - d, :, None] * G[: n - d]
+            blk[: n - d] = np.einsum("kip,kiq->kpq", Ga, G[d:])
+        H.append(blk)
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
-    # singularity distance itself)
+    # singularity distance itself), mean over frames
     e = cost.intrusion(y)
     active = e > 0
     if active.any():
+        lam = cost.refine_margin / n
+        close = np.maximum(e - CLOSE, 0.0)
         lower_near = (y[:, :8] - cost.lower) <= (cost.upper - y[:, :8])
         dd = np.concatenate([np.where(lower_near, 1.0, -1.0), np.ones((n, 2))], axis=1)
         dz = -dd / cost.zone  # dz/dy
-        gz = np.where(active, 2 * cost.margin * e * dz, 0.0)
-        hz = np.where(active, 2 * cost.margin * dz * dz, 0.0)
+        gz = np.where(active, 2 * (lam * e + cost.close_weight * close) * dz, 0.0)
+        hz = np.where(active, 2 * (lam + cost.close_weight * (close > 0)) * dz * dz, 0.0)
         g += np.einsum("ki,kip->kp", gz, grad_y)
         H[0] += np.einsum("ki,kip,kiq->kpq", hz, grad_y, grad_y)
-    if n > 1:  # run-up / run-out room: frames (0, 1) and (n - 1, n - 2)
-        for edge, inner in ((0, 1), (n - 1, n - 2)):
-            p, slope = cost.edge_excursion(q[edge], q[inner])
-            e = cost.edge_intrusion(p)
-            if not (e > 0).any():
-                continue
-            lower_near = (p - cost.lower) <= (cost.upper - p)
-            de = np.where(e > 0, -np.where(lower_near, 1.0, -1.0) / cost.zone[:8], 0.0)
-            ge, he = 2 * cost.margin * e * de, 2 * cost.margin * de * de
-            a_e = slope[:, None] * G[edge]  # dp/dx_edge (8, 2)
-            a_i = (1.0 - slope)[:, None] * G[inner]
-            g[edge] += ge @ a_e
-            g[inner] += ge @ a_i
-            H[0][edge] += (he[:, None, None] * a_e[:, :, None] * a_e[:, None, :]).sum(axis=0)
-            H[0][inner] += (he[:, None, None] * a_i[:, :, None] * a_i[:, None, :]).sum(axis=0)
-            lo_f = min(edge, inner)
-            a_lo, a_hi = (a_e, a_i) if edge < inner else (a_i, a_e)
-            H[1][lo_f] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
+    slow = max(1.0, cost.peak(q))
+    for edge, inner in ((0, 1), (n - 1, n - 2)):  # run-up / run-out room
+        pe, slope = cost.edge_excursion(q[edge], q[inner], slow)
+        e = cost.edge_intrusion(pe)
+        if not (e > 0).any():
+            continue
+        lower_near = (pe - cost.lower) <= (cost.upper - pe)
+        de = np.where(e > 0, -np.where(lower_near, 1.0, -1.0) / cost.zone[:8], 0.0)
+        beyond = np.maximum(e - 1.0, 0.0)
+        ge = 2 * (cost.refine_margin * e + cost.overspeed * beyond) * de
+        he = 2 * (cost.refine_margin + cost.overspeed * (beyond > 0)) * de * de
+        a_e = slope[:, None] * G[edge]  # dp/dx_edge (8, 2)
+        a_i = (1.0 - slope)[:, None] * G[inner]
+        g[edge] += ge @ a_e
+        g[inner] += ge @ a_i
+        H[0][edge] += (he[:, None, None] * a_e[:, :, None] * a_e[:, None, :]).sum(axis=0)
+        H[0][inner] += (he[:, None, None] * a_i[:, :, None] * a_i[:, None, :]).sum(axis=0)
+        lo_f = min(edge, inner)
+        a_lo, a_hi = (a_e, a_i) if edge < inner else (a_i, a_e)
+        H[1][lo_f] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
     return H, g
+
+
+def _gather(coef: Array, offset: int, dz: Array, w: Array, gq: Array, M: Array,
+            pad: int) -> None:
+    """Add one operator's terms to the joint-space gradient ``gq`` and curvature ``M``.
+
+    Row r of the operator reads frames r + offset + o with weights coef[r, o]; its gradient
+    in its value is dz[r] (rows, 8), its Gauss-Newton curvature w[r].
+    """
+    rows, width = coef.shape
+    base = pad + offset
+    for o1 in range(width):
+        c1 = coef[:, o1, None]
+        gq[base + o1:base + o1 + rows] += c1 * dz
+        cw = c1 * w
+        for o2 in range(o1, width):
+            M[o2 - o1, base + o1:base + o1 + rows] += coef[:, o2, None] * cw
 
 
 def _solve_banded(H: list[Array], g: Array, mu: float) -> Array:
     """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step.
 
-    ``H[d][i]`` is the 2x2 block coupling frame i with frame i + d (d = 0..3; the d = 0 blocks
-    are symmetric). Grouping four frames makes the matrix block tridiagonal (8x8 blocks:
-    frames couple at most three apart), solved by block elimination (the symmetric positive
+    ``H[d][i]`` is the 2x2 block coupling frame i with frame i + d (the d = 0 blocks are
+    symmetric). Grouping as many frames as the band is wide makes the matrix block
+    tridiagonal, solved by block elimination (the symmetric positive
     definite block Thomas algorithm): a few small numpy calls per group, and no scipy import
     on the first solve of a process (which costs more than every later solve together).
     """
     n = g.shape[0]
-    groups = -(-n // _GROUP)
-    m = groups * _GROUP  # frames, padded with unit rows (step 0) to whole groups
-    diag_blocks = np.zeros((groups, 2 * _GROUP, 2 * _GROUP))
-    upper_blocks = np.zeros((groups, 2 * _GROUP, 2 * _GROUP))
+    group = max(len(H) - 1, 1)
+    groups = -(-n // group)
+    m = groups * group  # frames, padded with unit rows (step 0) to whole groups
+    diag_blocks = np.zeros((groups, 2 * group, 2 * group))
+    upper_blocks = np.zeros((groups, 2 * group, 2 * group))
     for d, blk in enumerate(H):
         i = np.arange(n - d)
         j = i + d
-        gi, gj = i // _GROUP, j // _GROUP
-        ri, cj = 2 * (i % _GROUP), 2 * (j % _GROUP)
+        gi, gj = i // group, j // group
+        ri, cj = 2 * (i % group), 2 * (j % group)
         for r in range(2):
             for s in range(2):
                 vals = blk[: n - d, r, s]
@@ -236,7 +319,7 @@ def _solve_banded(H: list[Array], g: Array, mu: float) -> Array:
                     np.add.at(diag_blocks, (gi[same], cj[same] + s, ri[same] + r), vals[same])
                     nxt = ~same
                     np.add.at(upper_blocks, (gi[nxt], ri[nxt] + r, cj[nxt] + s), vals[nxt])
-    size = 2 * _GROUP
+    size = 2 * group
     eye = np.arange(size)
     diag = diag_blocks[:, eye, eye].reshape(-1)[: 2 * n]
     shift = 1e-9 * max(float(diag.max()), 1e-12) + 1e-12

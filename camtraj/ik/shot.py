@@ -22,16 +22,18 @@ closed-form branch are chosen for the whole shot, not frame by frame:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.ik.closed_form import (
+    EDGE,
     EXTEND,
     IDX,
     N_BRANCHES,
     TILT,
+    TWO_PI,
     TRACK,
     packed_limits,
     six_axis_branch,
@@ -147,8 +149,13 @@ def branch_measures(robot: Robot, targets: Array, r1: Array, r4: Array, previous
     return y, ok
 
 
-def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, Array]:
+def chain_costs(cost: ShotCost, cand: Candidates, merged: bool,
+                wrap: bool = True) -> tuple[Array, Array]:
     """The dynamic programme's tables.
+
+    With ``wrap`` a revolute step is the shorter way round (the joint values of a state are
+    one representative of its angle); without, it is the difference of the states' values
+    as they stand (the values are the path: :func:`lanes`).
 
     Returns:
         ``unary`` (n, C, S) and ``pair`` (n - 1, C, S, S): the margin cost of each state and
@@ -176,7 +183,7 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool) -> tuple[Array, 
             # track and extend do not depend on the branch: one chain's values serve all
             qi = q[i, :, :1] if shared and not REVOLUTE[i] else q[i]
             d = qi[a + 1:e + 1, :, None, :] - qi[a:e, :, :, None]
-            pair[a:e] += cost.axis_step_cost(i, d)
+            pair[a:e] += cost.axis_step_cost(i, d, wrap)
     if n > 1:  # run-up and run-out room at the shot's ends
         qs = np.moveaxis(q, 0, -1)  # (n, C, S, 8)
         pair[0] += cost.edge_cost(qs[0, :, :, None, :], qs[1, :, None, :, :])
@@ -233,11 +240,29 @@ class DPChoice:
 def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
     """Run the dynamic programme (per branch label, then merged if none reaches every frame).
 
+    Revolute steps are first taken the shorter way round; if the chosen path, made
+    continuous, cannot stay inside the position limits (a rotation of more than the range
+    allows), the programme runs again on the candidates as :func:`lanes` (values that are
+    the path itself, inside the limits), so every answer is inside the limits: an
+    unavoidable wrap shows as the large step it is.
+
     Returns None when no sequence of candidates reaches every frame.
     """
+    choice = _choose(cost, cand, wrap=True)
+    if choice is None:
+        return None
+    y = choice.y.copy()
+    y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
+    if inside_limits(y[:, :8], cost.lower, cost.upper):
+        return DPChoice(choice.cost, choice.point, choice.branch, y)
+    laned = replace(cand, y=lanes(cand.y, cost.lower, cost.upper, start))
+    return _choose(cost, laned, wrap=False)
+
+
+def _choose(cost: ShotCost, cand: Candidates, wrap: bool) -> DPChoice | None:
     n, g = cand.r1.shape
     for merged in (False, True):
-        unary, pair = chain_costs(cost, cand, merged)
+        unary, pair = chain_costs(cost, cand, merged, wrap)
         best, path = viterbi(unary, pair)
         if best.size == 0:
             continue
@@ -248,9 +273,42 @@ def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
             branch = states // g if merged else np.full(n, label)
             point = states % g if merged else states
             y = cand.y[np.arange(n), point, branch].copy()
-            y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
             return DPChoice(float(best[c]), point, branch, y)
     return None
+
+
+def inside_limits(q: Array, lower: Array, upper: Array) -> bool:
+    """Whether every frame of a path (n, 8) is inside the position limits (to round-off)."""
+    return bool(np.all((q >= lower - EDGE) & (q <= upper + EDGE)))
+
+
+def lanes(y: Array, lower: Array, upper: Array, start: Array) -> Array:
+    """Candidate measures (n, G, 8, 10) with each revolute value made continuous along the
+    frames of its lane (the same point and branch), shifted by whole turns to fit the limits
+    best (nearest ``start`` among equals) and folded back inside where it still leaves them.
+    """
+    out = y.copy()
+    n, g, b, _ = y.shape
+    for i in np.flatnonzero(REVOLUTE):
+        col = np.unwrap(y[..., i], axis=0)  # (n, G, 8)
+        best_key = np.full((g, b), np.inf)
+        best = col.copy()
+        for m in range(-2, 3):
+            c = col + TWO_PI * m
+            over = (np.maximum(c - upper[i], 0) + np.maximum(lower[i] - c, 0)).sum(axis=0)
+            key = over * 1e3 + np.abs(c[0] - start[i])
+            better = key < best_key
+            best_key = np.where(better, key, best_key)
+            best = np.where(better[None], c, best)
+        folded = best.copy()
+        for shift in (1, 2):  # the nearest whole turns back inside, where one is
+            for sign in (-1.0, 1.0):
+                c = best + sign * shift * TWO_PI
+                fits = (c >= lower[i]) & (c <= upper[i])
+                outside = (folded < lower[i]) | (folded > upper[i])
+                folded = np.where(outside & fits, c, folded)
+        out[..., i] = folded
+    return out
 
 
 def unwrap_into_limits(q: Array, lower: Array, upper: Array, start: Array) -> Array:

@@ -30,12 +30,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.ik.spline_ops import BandOp, spline_ops
 from camtraj.robot import PRISMATIC, REVOLUTE, Robot
 
 Array = NDArray[np.float64]
 
 TWO_PI = 2.0 * math.pi
 N_MEASURES = 10  # the 8 joints, the wrist singularity distance, the full-stretch distance
+#: Intrusion into a margin zone past which the refinement's cost turns steep (the last fifth
+#: of the zone: 5 deg before a revolute limit by default), so the spline through the frames
+#: has room to turn before a limit.
+CLOSE = 0.8
 
 
 @dataclass(frozen=True)
@@ -66,6 +71,11 @@ class ShotCost:
     dt: float
     a_max: Array
     j_max: Array
+    refine_margin: float = 0.1
+    close_weight: float = 1.0
+    tie_break: float = 0.01
+    power: float = 8.0
+    scale: float = 1.0
 
     @classmethod
     def for_robot(cls, robot: Robot, dt: float) -> ShotCost:
@@ -84,6 +94,107 @@ class ShotCost:
             dt=dt, a_max=robot.max_acceleration, j_max=robot.max_jerk,
         )
 
+    # -- the take's peak use (what the refinement minimises) -------------------------------
+    def usages(self, q: Array) -> list[tuple[BandOp, Array]]:
+        """The take's per-axis usages of a continuous path q (n, 8): the spline's velocity,
+        acceleration and jerk (:mod:`camtraj.ik.spline_ops`) at every knot and piece middle
+        over the limits per frame interval, one (operator, (rows, 8)) pair per operator."""
+        n = q.shape[0]
+        if n < 3:
+            return [(BandOp(1, np.array([[-1.0, 1.0]]), 0), np.diff(q, axis=0) / self.vel)]
+        lims = (self.vel, self.acc, self.jerk)
+        return [(op, op.apply(q) / lims[op.order - 1]) for op in spline_ops(n)]
+
+    def edge_needs(self, q: Array) -> tuple[Array, Array, Array, Array]:
+        """The slow-down each end's stop needs to stay under the velocity limit, as a usage.
+
+        A jerk-limited stop from a state still accelerating away from rest gains a^2 / 2J of
+        speed before it can brake (the timing stage's ``stop_slowdown``): slowed by s, the
+        state (v, a) becomes (v / s, a / s^2), and the need is the s that solves
+        |z1| / s + c z2^2 / s^4 = 1 with c = a_max^2 / (2 J v_max) (s = |z1| without gain).
+
+        Returns:
+            s (2, 8) for the run-up (row 0, the state reversed) and the run-out (row 1), its
+            derivatives in the spline's end velocity and acceleration usages (2, 8) each,
+            and the operator rows (2, width) that give those from the frames (first the
+            velocity's, then the acceleration's, stacked: (2, 2, width)).
+        """
+        n = q.shape[0]
+        ops = spline_ops(n)
+        vel_op, acc_op = ops[0], ops[2]  # order 1 and 2 at the knots
+        rows = np.stack([np.stack([vel_op.coef[0], acc_op.coef[0]]),
+                         np.stack([vel_op.coef[-1], acc_op.coef[-1]])])
+        z1 = vel_op.apply(q)[[0, -1]] / self.vel
+        z2 = acc_op.apply(q)[[0, -1]] / self.acc
+        c = self.a_max ** 2 / (2.0 * self.j_max * self.vel / self.dt)
+        gains = np.stack([z1[0] * z2[0] < 0.0, z1[1] * z2[1] > 0.0]) & (z2 != 0.0)
+        a1 = np.abs(z1)
+        g = np.where(gains, c * z2 * z2, 0.0)
+        lo, hi = np.zeros_like(a1), np.maximum(a1 + g, 1e-300) + 1.0
+        for _ in range(60):  # |z1| / s + g / s^4 falls with s
+            mid = 0.5 * (lo + hi)
+            fits = a1 * mid ** 3 + g <= mid ** 4
+            hi = np.where(fits, mid, hi)
+            lo = np.where(fits, lo, mid)
+        need = np.where(gains, hi, a1)
+        den = np.maximum(4.0 * need - 3.0 * a1, 1e-300)
+        d1 = np.where(gains, np.sign(z1) * need / den, np.sign(z1))
+        d2 = np.where(gains, 2.0 * c * z2 / (np.maximum(need, 1e-300) ** 2 * den), 0.0)
+        return need, d1, d2, rows
+
+    def peak(self, q: Array) -> float:
+        """The peak use P = max(|v|, |a|^(1/2), |j|^(1/3)) over the limits of the spline
+        through the path's frames, and the ends' stopping needs: the take runs at most at
+        1/P of real time."""
+        out = 0.0
+        for op, z in self.usages(q):
+            out = max(out, float(np.abs(z).max()) ** (1.0 / op.order))
+        if q.shape[0] >= 3:
+            out = max(out, float(self.edge_needs(q)[0].max()))
+        return out
+
+    def peak_norm(self, q: Array) -> float:
+        """Smooth stand-in for :meth:`peak`: ``scale * (sum (u / scale)^power)^(1/power)``
+        over every axis and evaluation point, with u = |v|, |a|^(1/2), |j|^(1/3), and the
+        ends' stopping needs."""
+        return self.scale * self.peak_sum(q) ** (1.0 / self.power)
+
+    def peak_sum(self, q: Array) -> float:
+        """The sum inside :meth:`peak_norm`."""
+        phi = 0.0
+        for op, z in self.usages(q):
+            k = op.order
+            phi += float(((np.abs(z) / self.scale ** k) ** (self.power / k)).sum())
+        if q.shape[0] >= 3:
+            phi += float(((self.edge_needs(q)[0] / self.scale) ** self.power).sum())
+        return phi
+
+    def refine_total(self, y: Array) -> float:
+        """What the refinement minimises for measures y (n, 10):
+        :meth:`peak_norm` + ``refine_margin`` * mean squared margin intrusion
+        + ``tie_break`` * mean motion per step + run-up / run-out room."""
+        q = y[:, :8]
+        n = q.shape[0]
+        e = self.intrusion(y)
+        close = np.maximum(e - CLOSE, 0.0)
+        j = (self.refine_margin * float((e * e).sum()) / n
+             + self.close_weight * float((close * close).sum()))
+        if n > 1:
+            j += self.peak_norm(q)
+            j += self.tie_break * float((np.abs(np.diff(q, axis=0) / self.vel)
+                                         @ self.motion_coef).sum()) / (n - 1)
+            slow = max(1.0, self.peak(q))
+            j += self.refine_edge(q[0], q[1], slow) + self.refine_edge(q[-1], q[-2], slow)
+        return j
+
+    def refine_edge(self, q_edge: Array, q_inner: Array, slow: float) -> float:
+        """Run-up / run-out room at an end frame, the take running ``slow`` times slower:
+        the margin cost of the stopping excursion and a steep cost beyond the limits."""
+        p = self.edge_excursion(q_edge, q_inner, slow)[0]
+        e = self.edge_intrusion(p)
+        beyond = np.maximum(e - 1.0, 0.0)
+        return float(self.refine_margin * (e * e).sum() + self.overspeed * (beyond * beyond).sum())
+
     # -- parts -----------------------------------------------------------------------------
     def steps(self, qa: Array, qb: Array) -> Array:
         """Velocity usage z1 (..., 8) of a step from qa to qb (revolute differences wrapped)."""
@@ -91,9 +202,10 @@ class ShotCost:
         d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
         return np.asarray(d / self.vel)
 
-    def axis_step_cost(self, axis: int, d: Array) -> Array:
-        """:meth:`first_order`'s share of one axis for steps ``d`` (any shape) [m, rad]."""
-        if REVOLUTE[axis]:
+    def axis_step_cost(self, axis: int, d: Array, wrap: bool = True) -> Array:
+        """:meth:`first_order`'s share of one axis for steps ``d`` (any shape) [m, rad],
+        revolute steps taken the shorter way round with ``wrap``."""
+        if wrap and REVOLUTE[axis]:
             d = d - TWO_PI * np.rint(d * (1.0 / TWO_PI))
         a = np.abs(d)
         a *= 1.0 / self.vel[axis]
@@ -137,14 +249,16 @@ class ShotCost:
         dd = np.where(big, v / a + 0.5 * a / j, 1.5 * root)
         return np.asarray(d), np.asarray(dd)
 
-    def edge_excursion(self, q_edge: Array, q_inner: Array) -> tuple[Array, Array]:
+    def edge_excursion(self, q_edge: Array, q_inner: Array,
+                       slow: float = 1.0) -> tuple[Array, Array]:
         """Where the run-up starts (or the run-out stops) at least: the edge frame's position
-        pushed out by the stopping distance of its velocity, (..., 8), and d p / d q_edge
-        (d p / d q_inner is 1 minus it)."""
+        pushed out by the stopping distance of its velocity (the take ``slow`` times slower
+        than the shot), (..., 8), and d p / d q_edge (d p / d q_inner is 1 minus it)."""
         d = q_edge - q_inner
         d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
-        dist, slope = self.stop_distance(np.abs(d) / self.dt)
-        return np.asarray(q_edge + np.sign(d) * dist), np.asarray(1.0 + slope / self.dt)
+        h = self.dt * slow
+        dist, slope = self.stop_distance(np.abs(d) / h)
+        return np.asarray(q_edge + np.sign(d) * dist), np.asarray(1.0 + slope / h)
 
     def edge_intrusion(self, p: Array) -> Array:
         """Margin intrusions (..., 8) of run-up / run-out excursions ``p`` (..., 8)."""

@@ -12,7 +12,7 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
 * **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
   beyond the frames. The spline's velocity and acceleration there follow from the frames
   themselves; only its jerk is set, to that of a least-squares cubic through the end frames,
-  and its snap to zero (:func:`_end_jerk`). This reproduces any cubic motion exactly, and a
+  and its snap to zero (:func:`end_jerk`). This reproduces any cubic motion exactly, and a
   disturbance of one end frame moves the acceleration and jerk no more than it would in the
   interior. Setting velocity and acceleration from the interpolating polynomial through the
   end frames instead (as before) amplified a curvature change near the end about five-fold in
@@ -103,7 +103,7 @@ class FramePath:
         clamped[:-1] |= still
         v_given[1:] = np.where(still, diff, 0.0)
         v_given[:-1] = np.where(still, diff, v_given[:-1])
-        jerk = _end_jerk(q, still)
+        jerk = end_jerk(q, still)
         v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
         limited = np.zeros((n, m), dtype=bool)
         for _ in range(_REFIT_ROUNDS):
@@ -216,7 +216,7 @@ def _timed(p: list[Array], xd: Array, xdd: Array, *, jerk_by_difference: bool = 
     return Samples(q=p0, qd=qd, qdd=qdd, qddd=qddd)
 
 
-def _end_jerk(q: Array, still: BoolArray) -> Array:
+def end_jerk(q: Array, still: BoolArray) -> Array:
     """Jerk (frame units) at the free first and last frame, shape (2, 8).
 
     That of the least-squares cubic through the (up to) :data:`END_FRAMES` frames of the
