@@ -1,12 +1,17 @@
 """Run-up and run-out: jerk-limited ruckig moves from rest into the first frame's state and
 from the last frame's state to rest.
 
+By default they are *gentle*: an axis's run-up and run-out use no more of its acceleration
+and jerk limits than the shot itself does, and at least :data:`GENTLE_FLOOR` of them
+(:func:`edge_limits`); ``"fast"`` edges use the full limits (the time-optimal move).
+
 Only ruckig's offline state-to-state calculation is used (no control cycle, no intermediate
 waypoints - those call a remote service). Units: SI (m, rad, s).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -20,6 +25,10 @@ Array = NDArray[np.float64]
 
 #: A boundary state within this fraction of the velocity and acceleration limits is at rest.
 REST_RTOL = 1e-9
+#: How run-ups and run-outs use the acceleration and jerk limits (see :func:`edge_limits`).
+EDGE_MODES: tuple[str, ...] = ("gentle", "fast")
+#: Gentle edges may always use this fraction of an axis's acceleration and jerk limits.
+GENTLE_FLOOR = 0.25
 _JERK_STEP = 1e-6  # [s] step of the one-sided difference that reads jerk off a ruckig move
 
 
@@ -118,26 +127,36 @@ def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
                  what="a stop from the shot's boundary state")
 
 
-def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
-    """Per axis, the uniform slow-down the stop from state (v, a) needs to stay within the
-    velocity limit, shape (8,) (<= 1 where it fits as is).
+def edge_limits(limits: Limits, acceleration: Array, jerk: Array, edges: str) -> Limits:
+    """The limits a run-up and run-out may use.
+
+    ``"fast"``: the robot's own. ``"gentle"``: per axis, the acceleration and jerk the shot
+    itself reaches (``acceleration``, ``jerk``: its peak magnitudes, (8,), boundary states
+    included), at least :data:`GENTLE_FLOOR` of the limit and at most the limit. Velocity and
+    position limits are the robot's.
+    """
+    if edges == "fast":
+        return limits
+    if edges != "gentle":
+        msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
+        raise ValueError(msg)
+    return dataclasses.replace(
+        limits,
+        acceleration=np.clip(acceleration, GENTLE_FLOOR * limits.acceleration,
+                             limits.acceleration),
+        jerk=np.clip(jerk, GENTLE_FLOOR * limits.jerk, limits.jerk),
+    )
+
+
+def stop_peak_velocity(v: Array, a: Array, limits: Limits) -> Array:
+    """Per axis, the highest speed of the shortest stop from the state (v, a), (8,).
 
     A jerk-limited stop that starts accelerating away from rest first has to bring the
-    acceleration to zero, gaining ``a² / 2J`` of speed: ``|v| + a² / 2J`` must not exceed
-    the limit (ruckig's velocity interface does not keep it). Slowed by ``s`` the state is
-    (v / s, a / s²); the smallest such ``s`` is found by bisection (the need falls with s).
-    For the run-up pass the reversed state (-v, a).
+    acceleration to zero, gaining ``a² / 2J`` of speed (ruckig's velocity interface does
+    not keep the velocity limit there). For the run-up pass the reversed state (-v, a).
     """
     gain = np.where(v * a > 0.0, a * a / (2.0 * limits.jerk), 0.0)
-    speed = np.abs(v)
-    lo = np.zeros(N_AXES)
-    hi = np.maximum(1.0, (speed + gain) / limits.velocity) + 1.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        fits = speed / mid + gain / mid**4 <= limits.velocity
-        hi = np.where(fits, mid, hi)
-        lo = np.where(fits, lo, mid)
-    out: Array = np.where(speed + gain > 0.0, hi, 0.0)
+    out: Array = np.abs(v) + gain
     return out
 
 
@@ -202,11 +221,47 @@ def _edge_report(
     }
 
 
-def _edge_position_check(move: _Move, limits: Limits, what: str, frame: int) -> None:
+@dataclass(frozen=True)
+class EdgeProblem:
+    """Why a run-up or run-out does not fit: ``text`` (one line), the ``axis`` index,
+    ``side`` (``"run-up"`` or ``"run-out"``), the film ``frame`` it joins and ``kind``
+    (``"position"``: it needs room beyond a limit, ``"velocity"``, or ``"plan"``: ruckig
+    found no move)."""
+
+    text: str
+    axis: int
+    side: str
+    frame: int
+    kind: str
+
+
+def velocity_problem(v: Array, a: Array, limits: Limits, side: str,
+                     frame: int) -> EdgeProblem | None:
+    """The run-out from state (v, a) (the run-up: pass (-v, a)) if its stop goes beyond a
+    velocity limit."""
+    peak = stop_peak_velocity(v, a, limits)
+    over = peak / limits.velocity
+    if not np.any(over > 1.0 + LIMIT_RTOL):
+        return None
+    j = int(np.argmax(over))
+    revolute = bool(limits.revolute[j])
+    what = (f"the run-up into frame {frame}" if side == "run-up"
+            else f"the run-out from frame {frame}")
+    text = (
+        f"{what} would need {limits.names[j]} velocity "
+        f"{fmt(float(peak[j]), 'velocity', revolute)}, beyond "
+        f"{fmt(float(limits.velocity[j]), 'velocity', revolute)} (the shot "
+        f"{'starts' if side == 'run-up' else 'ends'} still accelerating near that speed)"
+    )
+    return EdgeProblem(text, j, side, frame, "velocity")
+
+
+def room_problem(move: _Move, limits: Limits, side: str, frame: int) -> EdgeProblem | None:
+    """The move if it needs room beyond a position limit."""
     tol = LIMIT_RTOL * (limits.upper - limits.lower)
     over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
     if over.size == 0:
-        return
+        return None
     revolute = limits.revolute
     parts = []
     for j in over.tolist():
@@ -218,12 +273,55 @@ def _edge_position_check(move: _Move, limits: Limits, what: str, frame: int) -> 
             f"beyond its {'upper' if beyond_upper else 'lower'} limit "
             f"{fmt(float(bound), 'position', bool(revolute[j]))}"
         )
-    msg = (
-        f"the {what} {'into' if what == 'run-up' else 'from'} frame {frame} "
+    text = (
+        f"the {side} {'into' if side == 'run-up' else 'from'} frame {frame} "
         f"({move.duration:.2f} s) needs more room: " + "; ".join(parts)
-        + "; move the shot away from the limit or slow it down at that end"
     )
-    raise TimingLimitError(msg)
+    return EdgeProblem(text, int(over[0]), side, frame, "position")
+
+
+def _edge_position_check(move: _Move, limits: Limits, side: str, frame: int) -> None:
+    problem = room_problem(move, limits, side, frame)
+    if problem is not None:
+        msg = problem.text + "; move the shot away from the limit or slow it down at that end"
+        raise TimingLimitError(msg)
+
+
+def edge_problem(
+    first: tuple[Array, Array, Array], last: tuple[Array, Array, Array], limits: Limits,
+    frames: tuple[int, int], start: Array | None = None,
+) -> EdgeProblem | None:
+    """Whether the run-up into state ``first`` and the run-out from state ``last`` (each
+    (p, v, a)) fit ``limits`` (velocity and position; ruckig keeps acceleration and jerk):
+    the first problem found, or None. Plans the moves, samples nothing."""
+    p, v, a = first
+    if start is not None or not _at_rest(v, a, limits):
+        problem = velocity_problem(-v, a, limits, "run-up", frames[0])
+        if problem is not None:
+            return problem
+        try:
+            if start is None:
+                move = _stop_move(p, -v, a, limits)
+            else:
+                zero = np.zeros(N_AXES)
+                move = _Move((start, zero, zero), (p, v, a), limits, stop=False,
+                             what="the run-up from the start position")
+        except TimingLimitError as exc:
+            return EdgeProblem(str(exc), 0, "run-up", frames[0], "plan")
+        problem = room_problem(move, limits, "run-up", frames[0])
+        if problem is not None:
+            return problem
+    p, v, a = last
+    if not _at_rest(v, a, limits):
+        problem = velocity_problem(v, a, limits, "run-out", frames[1])
+        if problem is not None:
+            return problem
+        try:
+            move = _stop_move(p, v, a, limits)
+        except TimingLimitError as exc:
+            return EdgeProblem(str(exc), 0, "run-out", frames[1], "plan")
+        return room_problem(move, limits, "run-out", frames[1])
+    return None
 
 
 def runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> Edge:

@@ -1,0 +1,157 @@
+"""The timing path and the take's edges (issue 13 items 2 and 4, issue 15 section 1).
+
+Facts used:
+* symmetry: a move whose one axis turns exactly half-way between two frames (two equal
+  solutions of that axis) is the same move as one turning a hair later, so both fit at the
+  same speed;
+* the convex hull and the limits: between frames that are inside an axis's range, or on its
+  limit, the path is inside at every sample of a grid far finer than any servo rate;
+* divided differences: on any grid ``k! * f[t0..tk]`` is a weighted mean of the k-th
+  derivative, so the sampled positions of a take inside its limits keep every divided
+  difference inside them whatever the reported derivatives say.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from camtraj.robot import Robot
+from camtraj.timing import Limits, Take, time_shot
+from camtraj.timing.path import FramePath
+
+Array = NDArray[np.float64]
+FPS = 24.0
+HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
+TRACK, ROTATE, LIFT, EXTEND, ELBOW, PAN, TILT, ROLL = range(8)
+SLACK = 1e-3
+
+
+@pytest.fixture(scope="module")
+def limits() -> Limits:
+    return Limits.from_robot(Robot.default())
+
+
+def divided(t: Array, y: Array, order: int) -> Array:
+    """``order! * f[t_i, ..., t_{i+order}]`` per column."""
+    d = y.copy()
+    for level in range(1, order + 1):
+        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
+    return d * math.factorial(order)
+
+
+def assert_take_inside(take: Take, limits: Limits) -> None:
+    """Every servo sample of the whole take (run-up, shot, run-out) inside every limit: the
+    values written and the divided differences of the sampled positions."""
+    assert np.all(take.q <= limits.upper) and np.all(take.q >= limits.lower)
+    for arr, bound in ((take.qd, limits.velocity), (take.qdd, limits.acceleration),
+                       (take.qddd, limits.jerk)):
+        assert np.all(np.abs(arr) <= bound * (1 + 1e-9))
+    for order, bound in ((1, limits.velocity), (2, limits.acceleration), (3, limits.jerk)):
+        worst = float(np.max(np.abs(divided(take.t, take.q, order)) / bound))
+        assert worst <= 1 + SLACK, f"order {order}: {worst:.6f} of the limit"
+
+
+# ---------------------------------------------------------------------------------------------
+# Holds are holds of the camera, not turning points of one axis
+# ---------------------------------------------------------------------------------------------
+
+
+def turning(shift: float, n: int = 48) -> tuple[Array, Array]:
+    """The track moves through while rotate turns at the middle of the shot (+ ``shift`` s).
+
+    With an even frame count and no shift, the turning point is exactly half-way between
+    two frames, so those two rotate values are equal bit for bit.
+    """
+    i = np.arange(n)
+    t = (i - (n - 1) / 2) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 0.4 * t
+    q[:, ROTATE] += 0.3 * np.cos(1.5 * (t - shift))
+    q[:, PAN] += -0.2 * t
+    return i / FPS, q
+
+
+@pytest.mark.parametrize("mode", ["shot", "scale"])
+def test_a_turning_point_fits_at_the_same_speed_as_a_shifted_one(
+    limits: Limits, mode: str
+) -> None:
+    t, q = turning(0.0)
+    assert np.sum(q[1:, ROTATE] == q[:-1, ROTATE]) == 1  # the symmetric case
+    t2, q2 = turning(1e-4)
+    assert np.all(np.abs(np.diff(q2[:, ROTATE])) > 1e-9)
+    a = time_shot(q, t, limits, mode=mode)
+    b = time_shot(q2, t2, limits, mode=mode)
+    assert a.report.max_speed == pytest.approx(b.report.max_speed, rel=0.02)
+    # And the turning axis moves through its turning point (no stop there).
+    k = a.frame_samples[24]
+    assert a.report.peak_use["rotate"]["acceleration"] == pytest.approx(
+        b.report.peak_use["rotate"]["acceleration"], rel=0.02)
+    assert abs(a.qdd[k, ROTATE]) > 0.5 * 0.3 * 1.5**2
+
+
+def test_a_camera_hold_mask_keeps_a_still_robot_moving_when_the_camera_moves(
+    limits: Limits,
+) -> None:
+    # Only rotate moves, and it turns half-way between frames 23 and 24: the whole robot
+    # is still there, but the camera is not; with the camera's hold mask it is no hold.
+    t, q = turning(0.0)
+    q[:, TRACK] = HOME[TRACK]
+    q[:, PAN] = HOME[PAN]
+    plain = time_shot(q, t, limits, mode="scale")
+    camera = time_shot(q, t, limits, mode="scale", hold=np.zeros(q.shape[0] - 1, dtype=bool))
+    assert camera.report.max_speed > 2.0 * plain.report.max_speed
+    # A held camera stays a hold (the robot exactly still between those frames).
+    q[:10] = q[10]
+    mask = np.zeros(q.shape[0] - 1, dtype=bool)
+    mask[:10] = True
+    take = time_shot(q, t, limits, mode="scale", hold=mask)
+    a, b = take.frame_samples[0], take.frame_samples[10]
+    assert np.all(take.q[a : b + 1] == q[0])
+    assert np.all(take.qd[a : b + 1] == 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Between frames the path stays inside, also with frames on a limit (to round-off)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_frames_on_a_limit_give_a_path_inside_at_every_sample(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = 60
+    lower, upper = np.full(8, -0.05), np.full(8, 0.05)
+    scale = 0.01 if seed % 2 else 0.02
+    q = np.clip(np.cumsum(rng.normal(scale=scale, size=(n, 8)), axis=0), lower, upper)
+    on = np.abs(np.abs(q) - 0.05) == 0.0
+    assert np.sum(on) > 10
+    # Within round-off of the limit: on it, or up to 1e-9 inside.
+    inside = rng.uniform(0.0, 1e-9, size=q.shape) * (rng.random(q.shape) < 0.5)
+    q = np.where(on, np.sign(q) * (0.05 - inside), q)
+    path = FramePath.fit(q, 1 / FPS, lower, upper)
+    x = np.linspace(0.0, n - 1.0, 500 * (n - 1) + 1)
+    dense = path.at(x, 0)[0]
+    assert np.all(dense <= upper) and np.all(dense >= lower)
+    for ticks in (1, 3, 10, 41):
+        _, (grid, *_) = path.on_grid(ticks)
+        assert np.all(grid <= upper) and np.all(grid >= lower)
+        assert np.array_equal(grid[::ticks], q)
+
+
+def test_a_frame_a_hair_beyond_a_limit_takes_the_path_no_further(limits: Limits) -> None:
+    # The elbow rides its upper limit (0) at the end, one frame 1e-12 rad beyond it.
+    n = 48
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 0.3 * t
+    q[:, ELBOW] = np.minimum(0.0, -0.4 + 0.5 * t)
+    q[-3, ELBOW] = 1e-12
+    path = FramePath.fit(q, 1 / FPS, limits.lower, limits.upper)
+    x = np.linspace(0.0, n - 1.0, 500 * (n - 1) + 1)
+    dense = path.at(x, 0)[0]
+    assert dense[:, ELBOW].max() <= 1e-12
+    take = time_shot(q, t, limits, mode="scale")
+    assert take.q[:, ELBOW].max() <= 1e-12
