@@ -20,7 +20,7 @@ import pytest
 from numpy.typing import NDArray
 
 from camtraj.robot import Robot
-from camtraj.timing import Limits, Take, time_shot
+from camtraj.timing import Limits, Take, TimingLimitError, time_shot
 from camtraj.timing.path import FramePath
 
 Array = NDArray[np.float64]
@@ -155,3 +155,124 @@ def test_a_frame_a_hair_beyond_a_limit_takes_the_path_no_further(limits: Limits)
     assert dense[:, ELBOW].max() <= 1e-12
     take = time_shot(q, t, limits, mode="scale")
     assert take.q[:, ELBOW].max() <= 1e-12
+
+
+# ---------------------------------------------------------------------------------------------
+# --timing scale finds the factor that leaves the run-up and run-out room
+# ---------------------------------------------------------------------------------------------
+
+
+def towards_limit(axis: int, n: int, gap: float, speed: float, side: int) -> tuple[Array, Array]:
+    """The track moves on while ``axis`` ends ``gap`` from its upper (side +1) or lower (-1)
+    limit, moving towards it at ``speed`` [m/s or rad/s] until the last frame."""
+    lim = Limits.from_robot(Robot.default())
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 0.5 * t
+    bound = lim.upper[axis] if side > 0 else lim.lower[axis]
+    q[:, axis] = bound - side * gap + side * speed * (t - t[-1])
+    return t, q
+
+
+NEAR_LIMITS = [  # (axis, frames, gap, speed, side): all need a slower take for their run-out
+    (ELBOW, 24, 0.02, 0.3, -1),  # elbow towards -180 deg
+    (ELBOW, 12, 0.02, 0.5, -1),
+    (PAN, 48, 0.1, 1.5, +1),  # pan towards +270 deg
+    (EXTEND, 24, 0.02, 0.3, -1),  # extend towards 0 m
+    (TRACK, 36, 0.2, 1.2, +1),  # the end of the track
+]
+
+
+@pytest.mark.parametrize("edges", ["gentle", "fast"])
+@pytest.mark.parametrize("case", NEAR_LIMITS)
+def test_moves_ending_in_motion_near_a_limit_convert_with_scale(
+    limits: Limits, case: tuple[int, int, float, float, int], edges: str
+) -> None:
+    t, q = towards_limit(*case)
+    take = time_shot(q, t, limits, mode="scale", edges=edges)
+    assert take.speed_factor > 1.0
+    assert take.report.runout["duration"] > 0.0
+    assert np.max(np.abs(take.q[take.frame_samples] - q)) < 1e-12
+    assert_take_inside(take, limits)
+    # The smallest such factor: 1% faster the run-out has no room (or the shot its limits).
+    with pytest.raises(TimingLimitError, match=r"needs more room|exceeds"):
+        time_shot(q, t * (take.speed_factor / 1.01), limits, mode="shot", edges=edges)
+    # The shot's own timing fails, and says scale fits it, at the factor scale takes.
+    with pytest.raises(TimingLimitError) as info:
+        time_shot(q, t, limits, mode="shot", edges=edges)
+    err = info.value
+    assert "needs more room" in str(err)
+    assert err.scale_factor == pytest.approx(take.speed_factor, rel=1e-9)
+    assert f"fits at {math.floor(100 / take.speed_factor)}% speed" in str(err)
+    assert str(err).endswith("try --timing scale")
+
+
+@pytest.mark.parametrize(("gap", "axis", "side"), [(0.0, ELBOW, -1), (1e-7, LIFT, +1)])
+def test_an_axis_on_its_limit_moving_into_it_needs_another_ik_answer(
+    limits: Limits, gap: float, axis: int, side: int
+) -> None:
+    t, q = towards_limit(axis, 24, gap, 0.3, side)
+    name = limits.names[axis]
+    with pytest.raises(TimingLimitError, match=rf"run-out from frame 23 has no room even "
+                       rf"1000x slower: {name} is .* from its .* limit .*IK must leave room"):
+        time_shot(q, t, limits, mode="scale")
+    with pytest.raises(TimingLimitError) as info:
+        time_shot(q, t, limits, mode="shot")
+    assert math.isinf(info.value.scale_factor)
+    assert "try --timing scale" not in str(info.value)
+    assert "--timing scale does not fit it either" in str(info.value)
+    # The run-up side: the same move reversed in time starts on the limit.
+    with pytest.raises(TimingLimitError, match="run-up into frame 0 has no room"):
+        time_shot(q[::-1], t, limits, mode="scale")
+
+
+# ---------------------------------------------------------------------------------------------
+# Gentle run-ups and run-outs
+# ---------------------------------------------------------------------------------------------
+
+
+def in_motion(seed: int) -> tuple[Array, Array]:
+    """A shot in motion at both ends on every axis, mid-range."""
+    rng = np.random.default_rng(seed)
+    n = 73
+    t = np.arange(n) / FPS
+    amp = rng.uniform(0.05, 0.3, 8) * np.array([3, 1, 1, 0.5, 1, 1, 1, 1])
+    omega = rng.uniform(0.5, 2.5, 8)
+    q = HOME + amp * np.sin(omega * t[:, None] + rng.uniform(0, 2 * np.pi, 8))
+    return t, q
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("start", [False, True])
+def test_gentle_edges_use_no_more_than_the_shot_or_a_quarter(
+    limits: Limits, seed: int, start: bool
+) -> None:
+    t, q = in_motion(seed)
+    begin = HOME + 0.1 if start else None
+    gentle = time_shot(q, t, limits, mode="scale", start=begin)
+    fast = time_shot(q, t, limits, mode="scale", start=begin, edges="fast")
+    assert_take_inside(gentle, limits)
+    assert_take_inside(fast, limits)
+    a, b = gentle.frame_samples[0], gentle.frame_samples[-1]
+    for part, report in ((slice(0, a), gentle.report.runup),
+                         (slice(b + 1, None), gentle.report.runout)):
+        assert report["edges"] == "gentle"
+        for quantity, values, bound in (("acceleration", gentle.qdd, limits.acceleration),
+                                        ("jerk", gentle.qddd, limits.jerk)):
+            shot_use = np.array([gentle.report.peak_use[n][quantity] for n in limits.names])
+            edge_use = np.max(np.abs(values[part]), axis=0) / bound
+            assert np.all(edge_use <= np.maximum(shot_use, 0.25) * (1 + 1e-9))
+            # The report gives the same figures, separately from the shot's.
+            reported = np.array([report["peak_use"][n][quantity] for n in limits.names])
+            assert np.allclose(reported, edge_use, rtol=1e-12, atol=0)
+            # Measured from the positions too: the divided differences of the edge's
+            # samples are means of its acceleration / jerk.
+            order = 2 if quantity == "acceleration" else 3
+            est = np.abs(divided(gentle.t[part], gentle.q[part], order)) / bound
+            if est.size:
+                assert np.all(est <= np.maximum(shot_use, 0.25) * (1 + 1e-6) + 1e-9)
+    # The time-optimal edges are shorter, and use more of some limit.
+    assert fast.report.runout["duration"] < gentle.report.runout["duration"]
+    assert fast.report.runup["duration"] < gentle.report.runup["duration"]
+    fast_jerk = max(u["jerk"] for u in fast.report.runout["peak_use"].values())
+    assert fast_jerk == pytest.approx(1.0, rel=1e-6)

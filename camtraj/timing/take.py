@@ -484,19 +484,20 @@ class _EdgeFit:
         """Why no slower take fits: the edge still short of room at :data:`MAX_SCALE`."""
         problem = self.problem(MAX_SCALE)
         if problem is None or problem.kind != "position":  # pragma: no cover - defensive
-            return "no take up to {MAX_SCALE:g}x slower fits its run-up and run-out"
+            return f"no take up to {MAX_SCALE:g}x slower fits its run-up and run-out"
         j = problem.axis
         (p0, v0, _), (p1, v1, _) = self.ends
         lim = self.limits
         pos, vel = (p0[j], -v0[j]) if problem.side == "run-up" else (p1[j], v1[j])
         bound, side = (lim.upper[j], "upper") if vel > 0 else (lim.lower[j], "lower")
         rev = bool(lim.revolute[j])
+        what = ("the run-up into" if problem.side == "run-up" else "the run-out from")
         return (
-            f"{problem.text} even {MAX_SCALE:g}x slower: at frame {problem.frame} "
+            f"{what} frame {problem.frame} has no room even {MAX_SCALE:g}x slower: "
             f"{lim.names[j]} is {fmt(float(abs(bound - pos)), 'position', rev)} from its "
             f"{side} limit {fmt(float(bound), 'position', rev)} and "
-            f"{'arrives from' if problem.side == 'run-up' else 'moves towards'} it; "
-            "the IK must leave room there"
+            f"{'arrives from' if problem.side == 'run-up' else 'moves towards'} it there; "
+            "the IK must leave room at that end"
         )
 
 
