@@ -14,6 +14,7 @@ Facts used:
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -276,3 +277,96 @@ def test_gentle_edges_use_no_more_than_the_shot_or_a_quarter(
     assert fast.report.runup["duration"] < gentle.report.runup["duration"]
     fast_jerk = max(u["jerk"] for u in fast.report.runout["peak_use"].values())
     assert fast_jerk == pytest.approx(1.0, rel=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# What check and convert say, and the take of real shots
+# ---------------------------------------------------------------------------------------------
+
+
+def test_check_advises_scale_only_when_scale_fits(limits: Limits) -> None:
+    from camtraj.cli import _limit_report, _report
+    from camtraj.options import ConvertOptions
+
+    shot = ConvertOptions()
+    for case, fits in ((NEAR_LIMITS[1], True), ((ELBOW, 24, 0.0, 0.3, -1), False)):
+        t, q = towards_limit(*case)
+        with pytest.raises(TimingLimitError) as info:
+            time_shot(q, t, limits)
+        result = _limit_report("move.usda", info.value, shot)
+        text = _report(result)
+        assert ("try --timing scale" in text) == fits, text
+        assert "needs more room" in text  # what fails is said, also with no violation
+        if fits:
+            scale = time_shot(q, t, limits, mode="scale")
+            assert result["scale_factor"] == pytest.approx(scale.speed_factor)
+        else:
+            assert result["scale_factor"] is None
+            assert "the IK must leave room at that end" in text
+    # Asked for scale, it never advises scale.
+    t, q = towards_limit(ELBOW, 24, 0.0, 0.3, -1)
+    with pytest.raises(TimingLimitError) as info:
+        time_shot(q, t, limits, mode="scale")
+    text = _report(_limit_report("move.usda", info.value, ConvertOptions(timing="scale")))
+    assert "try --timing scale" not in text
+
+
+def test_camera_holds_are_equal_consecutive_poses() -> None:
+    from camtraj.convert import camera_holds
+
+    poses = np.tile(np.eye(4), (6, 1, 1))
+    poses[:, 0, 3] = [0.0, 0.0, 0.1, 0.1 + 1e-13, 0.2, 0.3]
+    poses[5, :3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    assert camera_holds(poses).tolist() == [True, False, True, False, False]
+
+
+def write_slide(path: Path, shift: float) -> Path:
+    """A camera sliding sideways across the track line (y through 0 at mid-shot, + shift)
+    at a constant 0.6 m/s, 24 fps, 48 frames, Z-up metres."""
+    from .shot_set import make_samples
+
+    ms = make_samples()
+    frames = np.arange(1, 49, dtype=np.float64)
+    t = (frames - 1) / FPS
+    y = 0.6 * (t - t[-1] / 2) + shift
+    pos = np.stack([np.full_like(t, 4.0), y, np.full_like(t, 1.2)], axis=1)
+    move = ms.Move(frames, pos, np.zeros_like(t), np.full_like(t, -5.0), 35.0, 3.0, 2.8)
+    body = ms._scope("Xform", "World", [ms._camera_prim_trs("cam", move, "Z", 1.0, "    ")])
+    text = ms._header("lateral slide", "Z", 1.0, frames, FPS, "World") + "\n" + body
+    path.write_text(text + "\n", encoding="utf-8")
+    return path
+
+
+def test_a_slide_across_the_track_line_fits_as_the_same_slide_moved_1_mm(
+    tmp_path: Path,
+) -> None:
+    from camtraj.convert import analyse
+    from camtraj.options import ConvertOptions
+
+    speeds = []
+    for shift in (0.0, 0.001):
+        take = analyse(write_slide(tmp_path / f"slide{shift}.usda", shift),
+                       ConvertOptions(timing="scale")).take
+        assert take is not None
+        speeds.append(take.report.max_speed)
+    assert speeds[0] == pytest.approx(speeds[1], rel=0.02)
+
+
+SAMPLE_SHOTS = Path(__file__).resolve().parents[1] / "samples" / "shots"
+
+
+@pytest.mark.parametrize("name", ["maya_dolly_push_in", "blender_crane_up", "whip_pan",
+                                  "orbit_animated_parent"])
+def test_sample_takes_settle_gently_into_and_out_of_the_move(name: str) -> None:
+    from camtraj.convert import analyse
+    from camtraj.options import ConvertOptions
+
+    limits = Limits.from_robot(Robot.default())
+    take = analyse(SAMPLE_SHOTS / f"{name}.usda", ConvertOptions(timing="scale")).take
+    assert take is not None
+    assert_take_inside(take, limits)
+    for report in (take.report.runup, take.report.runout):
+        for axis, use in report.get("peak_use", {}).items():
+            for quantity in ("acceleration", "jerk"):
+                own = take.report.peak_use[axis][quantity]
+                assert use[quantity] <= max(own, 0.25) * (1 + 1e-9), (axis, quantity)
