@@ -67,8 +67,9 @@ class TimingReport:
         max_speed: Maximum feasible speed as a fraction of real time, from the shot's own
             (real-time) timing: 1.0 means the shot's timing just fits, 0.5 that the robot can
             only do it at half speed, 2.0 that it could go twice as fast. Velocity scales with
-            the speed, acceleration with its square, jerk with its cube. ``inf`` if nothing
-            moves.
+            the speed, acceleration with its square, jerk with its cube; the run-up and
+            run-out must fit too (their room and speed). ``inf`` if nothing moves, 0 if no
+            uniform slow-down fits.
         feasible_fps: The frame rate at which the move could be shot at ``max_speed``
             (``fps * max_speed``) [frames/s], for a later speed change in post.
         limiting: Every (axis, quantity) the shot's own real-time timing exceeds (what forces
