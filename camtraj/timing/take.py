@@ -221,12 +221,16 @@ def time_shot(
     rt_x, rt, rt_checked, rt_checked_x = _grid_samples(path, ticks0, fps)
     fit = _EdgeFit.of(path, rt, limits, edges, start_q, frames)
     # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
-    need = fit.factor(slowdown(rt_checked, limits))
+    shot_need = slowdown(rt_checked, limits)
+    need = fit.factor(shot_need)
     max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
     limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
     position_bad = [v for v in limiting if v.quantity == "position"]
     if position_bad:
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
+
+    if mode == "optimal" and not math.isfinite(need):
+        need = shot_need  # no uniform slow-down has room; a retime may still end at rest
 
     def scaled() -> tuple[float, int, Samples, Array, Edge, Edge]:
         return _scale(path, dt, rate, limits, need, fit, start_q)
