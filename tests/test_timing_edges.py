@@ -370,3 +370,35 @@ def test_sample_takes_settle_gently_into_and_out_of_the_move(name: str) -> None:
             for quantity in ("acceleration", "jerk"):
                 own = take.report.peak_use[axis][quantity]
                 assert use[quantity] <= max(own, 0.25) * (1 + 1e-9), (axis, quantity)
+
+
+@pytest.mark.parametrize("kind", ["stop", "start"])
+def test_edge_samples_are_ruckigs_own_evaluation(limits: Limits, kind: str) -> None:
+    from camtraj.timing.edges import _Move, _stop_move
+
+    rng = np.random.default_rng(5)
+    zero = np.zeros(8)
+    for _ in range(10):
+        p = rng.uniform(-1.0, 1.0, 8)
+        v = rng.uniform(-1.0, 1.0, 8) * limits.velocity
+        a = rng.uniform(-1.0, 1.0, 8) * limits.acceleration
+        if kind == "stop":
+            move = _stop_move(p, v, a, limits)
+        else:
+            move = _Move((p + rng.uniform(-0.5, 0.5, 8), zero, zero), (p, 0.5 * v, 0.5 * a),
+                         limits, stop=False, what="a test run-up")
+        t = np.linspace(1e-9, move.duration * (1 - 1e-9), 401)
+        pos, vel, acc, jerk = move.sample(t)
+        for i, tm in enumerate(t.tolist()):
+            want = move._traj.at_time(tm)
+            assert np.allclose(pos[i], want[0], rtol=0, atol=1e-12)
+            assert np.allclose(vel[i], want[1], rtol=0, atol=1e-12)
+            assert np.allclose(acc[i], want[2], rtol=0, atol=1e-12)
+        assert np.all(np.abs(jerk) <= limits.jerk * (1 + 1e-12))
+        # Jerk is the derivative of the acceleration (a mean of it over each step).
+        slope = np.diff(acc, axis=0) / np.diff(t)[:, None]
+        assert np.all(np.abs(slope) <= limits.jerk * (1 + 1e-9))
+        mid = 0.5 * (t[1:] + t[:-1])
+        centre = move.sample(mid)[3]
+        same = jerk[:-1] == jerk[1:]  # no phase change inside the step: the slope is exact
+        assert np.allclose(slope[same], centre[same], rtol=1e-6, atol=1e-9 * limits.jerk.max())

@@ -29,7 +29,6 @@ REST_RTOL = 1e-9
 EDGE_MODES: tuple[str, ...] = ("gentle", "fast")
 #: Gentle edges may always use this fraction of an axis's acceleration and jerk limits.
 GENTLE_FLOOR = 0.25
-_JERK_STEP = 1e-6  # [s] step of the one-sided difference that reads jerk off a ruckig move
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,34 +89,59 @@ class _Move:
         # Position range of the move, exactly, from ruckig's per-axis phases (its own
         # position_extrema is not reliable with the velocity interface).
         ranges = np.array([_phase_range(prof) for prof in traj.profiles[0]])
+        self._phases = [_phases(prof) for prof in traj.profiles[0]]
+        if any(prof.accel.duration > 0.0 for prof in traj.profiles[0]):  # pragma: no cover
+            msg = f"ruckig planned {what} with a final acceleration phase (not expected)"
+            raise TimingLimitError(msg)
         self.min = np.minimum(ranges[:, 0], self.rest_position)
         self.max = np.maximum(ranges[:, 1], self.rest_position)
 
     def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
         """Position, velocity, acceleration and jerk at move times, each (k, 8).
 
-        Beyond the move's rest end (after a stop, before a start) the state is exactly rest
-        at the rest position. Jerk is read as a short one-sided difference of the
-        acceleration (ruckig's jerk is piecewise constant; the difference is a mean of it, so
-        never beyond the limit).
+        Evaluated exactly from ruckig's per-axis phases (constant jerk in each), all samples
+        at once; the jerk is that of the phase just after the sample time. Beyond the move's
+        rest end (after a stop, before a start) the state is exactly rest at the rest
+        position; an axis that has finished its own profile holds its final state.
         """
         k = times.size
         p = np.empty((k, N_AXES))
-        v = np.zeros((k, N_AXES))
-        a = np.zeros((k, N_AXES))
-        j = np.zeros((k, N_AXES))
-        at = self._traj.at_time
-        for i, tm in enumerate(times.tolist()):
-            if (tm >= self.duration) if self._stop else (tm <= 0.0):
-                p[i] = self.rest_position
-                continue
-            tm = min(max(tm, 0.0), self.duration)
-            pi, vi, ai = at(tm)
-            p[i], v[i], a[i] = pi, vi, ai
-            t2 = min(tm + _JERK_STEP, self.duration)
-            if t2 > tm:
-                j[i] = (np.array(at(t2)[2]) - a[i]) / (t2 - tm)
+        v = np.empty((k, N_AXES))
+        a = np.empty((k, N_AXES))
+        j = np.empty((k, N_AXES))
+        tm = np.clip(times, 0.0, self.duration)
+        for axis, (seg, start, final) in enumerate(self._phases):
+            end = start[-1] + seg[-1, 4]
+            idx = np.clip(np.searchsorted(start, tm, side="right") - 1, 0, seg.shape[0] - 1)
+            tau = np.minimum(tm - start[idx], seg[idx, 4])
+            p0, v0, a0, jj = seg[idx, 0], seg[idx, 1], seg[idx, 2], seg[idx, 3]
+            # After its own profile an axis goes on at its final velocity and acceleration
+            # (zero for a stop), as ruckig does.
+            done = tm >= end
+            after = tm - end
+            p[:, axis] = np.where(
+                done, final[0] + after * (final[1] + after * final[2] / 2.0),
+                p0 + tau * (v0 + tau * (a0 / 2.0 + tau * jj / 6.0)))
+            v[:, axis] = np.where(done, final[1] + after * final[2],
+                                  v0 + tau * (a0 + tau * jj / 2.0))
+            a[:, axis] = np.where(done, final[2], a0 + tau * jj)
+            j[:, axis] = np.where(done, 0.0, jj)
+        rest = (times >= self.duration) if self._stop else (times <= 0.0)
+        p[rest] = self.rest_position
+        v[rest] = a[rest] = j[rest] = 0.0
         return p, v, a, j
+
+
+def _phases(profile: Any) -> tuple[Array, Array, tuple[float, float, float]]:
+    """One axis's ruckig profile as phases of constant jerk: rows (p, v, a, j, duration) at
+    each phase's start, the phases' start times, and the state at its end (p, v, a)."""
+    rows = [(profile.brake.p[i], profile.brake.v[i], profile.brake.a[i], profile.brake.j[i],
+             profile.brake.t[i]) for i in range(2)]
+    rows += [(profile.p[i], profile.v[i], profile.a[i], profile.j[i], profile.t[i])
+             for i in range(7)]
+    seg = np.array(rows, dtype=np.float64)
+    start = np.concatenate([[0.0], np.cumsum(seg[:-1, 4])])
+    return seg, start, (float(profile.p[7]), float(profile.v[7]), float(profile.a[7]))
 
 
 def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
