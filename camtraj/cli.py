@@ -399,6 +399,8 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
         "timing": getattr(options, "timing", None),
         "max_speed": exc.max_speed,
         "feasible_fps": exc.feasible_fps,
+        # The slow-down --timing scale takes (it was run); null when it fails too.
+        "scale_factor": (exc.scale_factor if math.isfinite(exc.scale_factor) else None),
         "violations": [
             {"axis": v.axis, "quantity": v.quantity, "peak": v.peak, "limit": v.limit,
              "ratio": v.ratio, "frames": v.frame_text, "text": v.describe()}
@@ -435,6 +437,16 @@ def _pct(x: float) -> str:
     return f"{100 * x:4.0f}%" if x < 100.0 else ">9999%"
 
 
+def _edge_use(r: dict[str, Any]) -> dict[str, dict[str, float]]:
+    """Per axis, the run-up's and run-out's peak acceleration and jerk use (the larger)."""
+    out = {}
+    for name in JOINT_NAMES:
+        parts = [r[k].get("peak_use", {}).get(name, {}) for k in ("runup", "runout")]
+        out[name] = {q: max((p.get(q, 0.0) for p in parts), default=0.0)
+                     for q in ("acceleration", "jerk")}
+    return out
+
+
 def _report(r: dict[str, Any]) -> str:
     """The human-readable report of a convert / check run."""
     if r["status"] == "unreachable":
@@ -449,11 +461,18 @@ def _report(r: dict[str, Any]) -> str:
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
-        speed = r["max_speed"]
-        if speed is not None and math.isfinite(speed):
-            fps = r["feasible_fps"] / speed if speed > 0 else math.nan
+        message, either = r["message"], "--timing scale does not fit it either: "
+        if not r["violations"]:
+            lines.append(f"  {message}")
+        elif either in message:
+            lines.append(f"  {either}{message.split(either, 1)[1]}")
+        speed, factor = r["max_speed"], r.get("scale_factor")
+        if speed is not None and math.isfinite(speed) and speed > 0:
+            fps = r["feasible_fps"] / speed
+            advice = ("; try --timing scale" if factor is not None and r["timing"] != "scale"
+                      else "")
             lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
-                         "; try --timing scale")
+                         + advice)
         return "\n".join(lines)
     fr = r["frames"]
     lines = [
@@ -463,9 +482,10 @@ def _report(r: dict[str, Any]) -> str:
         f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
-        "  axis      position velocity  accel   jerk   run-up   run-out (extent)"
-        "   margin  to start",
+        "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
+        "(extent)   margin  to start",
     ]
+    ends = _edge_use(r)
     margins, start = r["margins"], r["move_to_start"]
     for i, name in enumerate(JOINT_NAMES):
         use = r["peak_use"].get(name, {})
@@ -475,7 +495,8 @@ def _report(r: dict[str, Any]) -> str:
         lines.append(
             f"  {name:<8} {_pct(use.get('position', math.nan))}    "
             f"{_pct(use.get('velocity', math.nan))}   {_pct(use.get('acceleration', math.nan))}"
-            f"  {_pct(use.get('jerk', math.nan))}  {up:7.3f}  {out:7.3f} {unit:<3}"
+            f"  {_pct(use.get('jerk', math.nan))}        {_pct(ends[name]['acceleration'])}"
+            f" {_pct(ends[name]['jerk'])}  {up:7.3f}  {out:7.3f} {unit:<3}"
             f" {margins['to_limits'][name]:8.3f} {start['extent'][name]:8.3f}"
         )
     lines.append(f"  margin: wrist singularity {margins['wrist_singularity_deg']:.1f} deg (frame "
@@ -485,7 +506,8 @@ def _report(r: dict[str, Any]) -> str:
     lines.append(f"  move to start: {start['duration_s']:.2f} s from the start pose (to start "
                  f"column: travel per axis)")
     lines.append(f"  run-up {r['runup']['duration_s']:.2f} s, run-out "
-                 f"{r['runout']['duration_s']:.2f} s")
+                 f"{r['runout']['duration_s']:.2f} s ({r.get('edges', 'gentle')}; ends column: "
+                 "their peak use of the limits)")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

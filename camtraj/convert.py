@@ -117,6 +117,18 @@ def load_placement(options: ConvertOptions) -> Placement:
     return Placement()
 
 
+HOLD_POSE_TOL = 1e-12
+"""Consecutive camera poses whose matrix entries differ by at most this (m, or unitless for
+the rotation) are a hold of the camera."""
+
+
+def camera_holds(targets: Array) -> NDArray[np.bool_]:
+    """Per frame pair, whether the camera pose holds still, shape (n - 1,)."""
+    held: NDArray[np.bool_] = np.all(
+        np.abs(np.diff(targets, axis=0)) <= HOLD_POSE_TOL, axis=(1, 2))
+    return held
+
+
 @contextmanager
 def _stage(timings: dict[str, float], name: str) -> Iterator[None]:
     t0 = time.perf_counter()
@@ -177,6 +189,7 @@ def analyse(
         analysis.take = time_shot(
             analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
             rate=options.rate, frame_numbers=shot.frames, start=start,
+            hold=camera_holds(targets), edges=options.edges,
         )
     set_file = SetFile.read(options.set_file) if options.set_file is not None else None
     if set_file is not None and set_file.prims:
@@ -359,6 +372,8 @@ def summary(
         return {
             "duration_s": part.get("duration", 0.0),
             "extent": {k: _axis_value(k, v) for k, v in part.get("extent", {}).items()},
+            # Its own peak use of the limits (fractions), apart from the shot's peak_use.
+            "peak_use": part.get("peak_use", {}),
         }
 
     return {
@@ -372,6 +387,7 @@ def summary(
         "robot": analysis.robot.name,
         "placement": analysis.placement.describe(),
         "timing": take.mode,
+        "edges": options.edges,
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": float(take.rate),
         "duration": float(take.duration),

@@ -19,6 +19,7 @@ import click
 from camtraj.errors import InputError
 
 TIMING_MODES = ("shot", "scale", "optimal")
+EDGE_MODES = ("gentle", "fast")
 OBJECTIVES = ("shot", "paper")
 FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
@@ -42,6 +43,9 @@ class ConvertOptions:
             older exporters write).
         clearance: Distance the robot must keep from the set file's obstacles [m]; default
             the set file's ``[collision] clearance_m``.
+        edges: How the run-up and run-out move: ``"gentle"`` (per axis no more of the
+            acceleration and jerk limits than the shot uses, at least a quarter of them) or
+            ``"fast"`` (the full limits: the shortest, time-optimal run-up and run-out).
     """
 
     camera: str | None = None
@@ -55,6 +59,7 @@ class ConvertOptions:
     objective: str | None = None
     focal_length_unit: str = "schema"
     clearance: float | None = None
+    edges: str = "gentle"
 
     def __post_init__(self) -> None:
         if self.timing not in TIMING_MODES:
@@ -77,6 +82,9 @@ class ConvertOptions:
             raise InputError(msg)
         if self.clearance is not None and not 0.0 <= self.clearance <= 5.0:
             msg = f"clearance must be between 0 and 5 m, got {self.clearance}"
+            raise InputError(msg)
+        if self.edges not in EDGE_MODES:
+            msg = f"edges must be one of {', '.join(EDGE_MODES)}, got {self.edges!r}"
             raise InputError(msg)
 
 
@@ -182,8 +190,8 @@ def convert_options(func: F) -> F:
 
 
 def more_convert_options(func: F) -> F:
-    """Click decorator adding ``--set-file``, ``--start-from``, ``--objective`` and
-    ``--focal-length-unit``.
+    """Click decorator adding ``--set-file``, ``--start-from``, ``--objective``,
+    ``--focal-length-unit``, ``--clearance`` and ``--edges``.
 
     The less common convert options; pass their values to :func:`build_options` too.
     """
@@ -218,6 +226,14 @@ def more_convert_options(func: F) -> F:
             metavar="M",
             help="Distance [m] the robot must keep from the set file's [collision] prims "
             "(default: the set file's clearance_m).",
+        ),
+        click.option(
+            "--edges",
+            type=click.Choice(EDGE_MODES),
+            default="gentle",
+            show_default=True,
+            help="Run-up and run-out: gentle = per axis no more acceleration and jerk than the "
+            "shot uses (at least 25% of the limits); fast = the full limits (shortest).",
         ),
     ]
     for decorator in reversed(decorators):
@@ -262,6 +278,7 @@ def build_options(
     objective: str | None = None,
     focal_length_unit: str = "schema",
     clearance: float | None = None,
+    edges: str = "gentle",
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
 
@@ -281,6 +298,7 @@ def build_options(
         objective=objective,
         focal_length_unit=focal_length_unit,
         clearance=clearance,
+        edges=edges,
     )
 
 
@@ -311,6 +329,8 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--focal-length-unit", options.focal_length_unit))
     if options.clearance is not None:
         pairs.append(("--clearance", repr(float(options.clearance))))
+    if options.edges != "gentle":
+        pairs.append(("--edges", options.edges))
     return pairs
 
 

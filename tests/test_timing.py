@@ -455,7 +455,7 @@ def test_runup_needing_room_beyond_a_limit_is_reported(limits: Limits) -> None:
     lower = float(limits.lower[TRACK])
     q[:, TRACK] = lower + 0.01 + 1.5 * t  # starts 1 cm from the end of the track at 1.5 m/s
     with pytest.raises(TimingLimitError, match=r"run-up into frame 0 .*track goes to -2\.\d+ m"):
-        time_shot(q, t, limits)
+        time_shot(q, t, limits, edges="fast")
 
 
 def test_all_still_shot_is_a_plain_hold(limits: Limits) -> None:

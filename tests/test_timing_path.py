@@ -259,7 +259,7 @@ def test_a_shot_ending_at_full_speed_while_accelerating_is_slowed_for_its_run_ou
     q = np.tile(HOME, (n, 1))
     q[:, TRACK] = 3.0 + (1.95 - 1.5 * t[-1]) * t + 0.75 * t**2
     with pytest.raises(TimingLimitError, match=r"run-out from frame 48 would need track "
-                       r"velocity 2\.0\d m/s, beyond 2 m/s.*try --timing scale"):
+                       r"velocity 2\.\d+ m/s, beyond 2 m/s.*try --timing scale"):
         time_shot(q, t, limits)
     take = time_shot(q, t, limits, mode="scale")
     assert take.speed_factor > 1.0
@@ -275,7 +275,8 @@ def test_random_paths_pass_every_frame_hold_still_and_stay_inside(seed: int) -> 
     rng = np.random.default_rng(seed)
     n = 120
     lower, upper = np.full(8, -0.05), np.full(8, 0.05)
-    steps = rng.normal(scale=0.02, size=(n, 8)) * (rng.random((n, 8)) > 0.2)
+    steps = (rng.normal(scale=0.02, size=(n, 8)) * (rng.random((n, 8)) > 0.2)
+             * (rng.random((n, 1)) > 0.15))  # some frame pairs where the whole robot holds
     q = np.clip(np.cumsum(steps, axis=0), lower, upper)
     path = FramePath.fit(q, 1 / FPS, lower, upper)
     x = np.linspace(0.0, n - 1.0, 200 * (n - 1) + 1)
@@ -286,12 +287,13 @@ def test_random_paths_pass_every_frame_hold_still_and_stay_inside(seed: int) -> 
     plain = FramePath.fit(q, 1 / FPS, lower - 1.0, upper + 1.0).at(x, 0)[0]
     assert np.any(plain > upper) or np.any(plain < lower)
     assert np.any(path.clamped_for_limits)
-    # Where two frames are equal the axis stands exactly still between them.
-    for j in range(8):
-        for i in np.flatnonzero(q[1:, j] == q[:-1, j]):
-            seg = slice(200 * i, 200 * (i + 1) + 1)
-            assert np.all(p[0][seg, j] == q[i, j])
-            assert np.all(p[1][seg, j] == 0.0)
+    # Where two frames are equal on every axis the robot stands exactly still between them.
+    held = np.flatnonzero(np.all(q[1:] == q[:-1], axis=1))
+    assert held.size > 0
+    for i in held:
+        seg = slice(200 * i, 200 * (i + 1) + 1)
+        assert np.all(p[0][seg] == q[i])
+        assert np.all(p[1][seg] == 0.0)
     # Acceleration is continuous across frames (the path is C2 everywhere).
     left = path.at(np.arange(1, n) - 1e-9, 2)[2]
     right = path.at(np.arange(1, n, dtype=np.float64), 2)[2]

@@ -14,10 +14,12 @@ The stages inside :func:`time_shot`, one module each:
    frames). This gives :attr:`TimingReport.max_speed` and :attr:`TimingReport.limiting`.
 3. **Timing mode** (:mod:`~camtraj.timing.take`, :mod:`~camtraj.timing.optimal`). ``"shot"``
    keeps the film's timing (and raises :class:`TimingLimitError` if a limit is exceeded);
-   ``"scale"`` slows the whole move uniformly by the smallest factor that fits;
+   ``"scale"`` slows the whole move uniformly by the smallest factor at which it and its
+   run-up and run-out fit;
    ``"optimal"`` retimes the same path time-optimally with toppra (imported only then).
 4. **Run-up and run-out** (:mod:`~camtraj.timing.edges`). Jerk-limited ruckig moves from rest
-   into the first frame's full state and from the last frame's state to rest.
+   into the first frame's full state and from the last frame's state to rest; gentle by
+   default (no more acceleration and jerk per axis than the shot uses, at least 25%).
 
 Every film frame is a servo sample and the stream passes exactly through each frame's solution.
 

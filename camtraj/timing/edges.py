@@ -1,12 +1,17 @@
 """Run-up and run-out: jerk-limited ruckig moves from rest into the first frame's state and
 from the last frame's state to rest.
 
+By default they are *gentle*: an axis's run-up and run-out use no more of its acceleration
+and jerk limits than the shot itself does, and at least :data:`GENTLE_FLOOR` of them
+(:func:`edge_limits`); ``"fast"`` edges use the full limits (the time-optimal move).
+
 Only ruckig's offline state-to-state calculation is used (no control cycle, no intermediate
 waypoints - those call a remote service). Units: SI (m, rad, s).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -20,7 +25,10 @@ Array = NDArray[np.float64]
 
 #: A boundary state within this fraction of the velocity and acceleration limits is at rest.
 REST_RTOL = 1e-9
-_JERK_STEP = 1e-6  # [s] step of the one-sided difference that reads jerk off a ruckig move
+#: How run-ups and run-outs use the acceleration and jerk limits (see :func:`edge_limits`).
+EDGE_MODES: tuple[str, ...] = ("gentle", "fast")
+#: Gentle edges may always use this fraction of an axis's acceleration and jerk limits.
+GENTLE_FLOOR = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,34 +89,59 @@ class _Move:
         # Position range of the move, exactly, from ruckig's per-axis phases (its own
         # position_extrema is not reliable with the velocity interface).
         ranges = np.array([_phase_range(prof) for prof in traj.profiles[0]])
+        self._phases = [_phases(prof) for prof in traj.profiles[0]]
+        if any(prof.accel.duration > 0.0 for prof in traj.profiles[0]):  # pragma: no cover
+            msg = f"ruckig planned {what} with a final acceleration phase (not expected)"
+            raise TimingLimitError(msg)
         self.min = np.minimum(ranges[:, 0], self.rest_position)
         self.max = np.maximum(ranges[:, 1], self.rest_position)
 
     def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
         """Position, velocity, acceleration and jerk at move times, each (k, 8).
 
-        Beyond the move's rest end (after a stop, before a start) the state is exactly rest
-        at the rest position. Jerk is read as a short one-sided difference of the
-        acceleration (ruckig's jerk is piecewise constant; the difference is a mean of it, so
-        never beyond the limit).
+        Evaluated exactly from ruckig's per-axis phases (constant jerk in each), all samples
+        at once; the jerk is that of the phase just after the sample time. Beyond the move's
+        rest end (after a stop, before a start) the state is exactly rest at the rest
+        position; an axis that has finished its own profile holds its final state.
         """
         k = times.size
         p = np.empty((k, N_AXES))
-        v = np.zeros((k, N_AXES))
-        a = np.zeros((k, N_AXES))
-        j = np.zeros((k, N_AXES))
-        at = self._traj.at_time
-        for i, tm in enumerate(times.tolist()):
-            if (tm >= self.duration) if self._stop else (tm <= 0.0):
-                p[i] = self.rest_position
-                continue
-            tm = min(max(tm, 0.0), self.duration)
-            pi, vi, ai = at(tm)
-            p[i], v[i], a[i] = pi, vi, ai
-            t2 = min(tm + _JERK_STEP, self.duration)
-            if t2 > tm:
-                j[i] = (np.array(at(t2)[2]) - a[i]) / (t2 - tm)
+        v = np.empty((k, N_AXES))
+        a = np.empty((k, N_AXES))
+        j = np.empty((k, N_AXES))
+        tm = np.clip(times, 0.0, self.duration)
+        for axis, (seg, start, final) in enumerate(self._phases):
+            end = start[-1] + seg[-1, 4]
+            idx = np.clip(np.searchsorted(start, tm, side="right") - 1, 0, seg.shape[0] - 1)
+            tau = np.minimum(tm - start[idx], seg[idx, 4])
+            p0, v0, a0, jj = seg[idx, 0], seg[idx, 1], seg[idx, 2], seg[idx, 3]
+            # After its own profile an axis goes on at its final velocity and acceleration
+            # (zero for a stop), as ruckig does.
+            done = tm >= end
+            after = tm - end
+            p[:, axis] = np.where(
+                done, final[0] + after * (final[1] + after * final[2] / 2.0),
+                p0 + tau * (v0 + tau * (a0 / 2.0 + tau * jj / 6.0)))
+            v[:, axis] = np.where(done, final[1] + after * final[2],
+                                  v0 + tau * (a0 + tau * jj / 2.0))
+            a[:, axis] = np.where(done, final[2], a0 + tau * jj)
+            j[:, axis] = np.where(done, 0.0, jj)
+        rest = (times >= self.duration) if self._stop else (times <= 0.0)
+        p[rest] = self.rest_position
+        v[rest] = a[rest] = j[rest] = 0.0
         return p, v, a, j
+
+
+def _phases(profile: Any) -> tuple[Array, Array, tuple[float, float, float]]:
+    """One axis's ruckig profile as phases of constant jerk: rows (p, v, a, j, duration) at
+    each phase's start, the phases' start times, and the state at its end (p, v, a)."""
+    rows = [(profile.brake.p[i], profile.brake.v[i], profile.brake.a[i], profile.brake.j[i],
+             profile.brake.t[i]) for i in range(2)]
+    rows += [(profile.p[i], profile.v[i], profile.a[i], profile.j[i], profile.t[i])
+             for i in range(7)]
+    seg = np.array(rows, dtype=np.float64)
+    start = np.concatenate([[0.0], np.cumsum(seg[:-1, 4])])
+    return seg, start, (float(profile.p[7]), float(profile.v[7]), float(profile.a[7]))
 
 
 def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
@@ -118,26 +151,36 @@ def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
                  what="a stop from the shot's boundary state")
 
 
-def stop_slowdown(v: Array, a: Array, limits: Limits) -> Array:
-    """Per axis, the uniform slow-down the stop from state (v, a) needs to stay within the
-    velocity limit, shape (8,) (<= 1 where it fits as is).
+def edge_limits(limits: Limits, acceleration: Array, jerk: Array, edges: str) -> Limits:
+    """The limits a run-up and run-out may use.
+
+    ``"fast"``: the robot's own. ``"gentle"``: per axis, the acceleration and jerk the shot
+    itself reaches (``acceleration``, ``jerk``: its peak magnitudes, (8,), boundary states
+    included), at least :data:`GENTLE_FLOOR` of the limit and at most the limit. Velocity and
+    position limits are the robot's.
+    """
+    if edges == "fast":
+        return limits
+    if edges != "gentle":
+        msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
+        raise ValueError(msg)
+    return dataclasses.replace(
+        limits,
+        acceleration=np.clip(acceleration, GENTLE_FLOOR * limits.acceleration,
+                             limits.acceleration),
+        jerk=np.clip(jerk, GENTLE_FLOOR * limits.jerk, limits.jerk),
+    )
+
+
+def stop_peak_velocity(v: Array, a: Array, limits: Limits) -> Array:
+    """Per axis, the highest speed of the shortest stop from the state (v, a), (8,).
 
     A jerk-limited stop that starts accelerating away from rest first has to bring the
-    acceleration to zero, gaining ``a² / 2J`` of speed: ``|v| + a² / 2J`` must not exceed
-    the limit (ruckig's velocity interface does not keep it). Slowed by ``s`` the state is
-    (v / s, a / s²); the smallest such ``s`` is found by bisection (the need falls with s).
-    For the run-up pass the reversed state (-v, a).
+    acceleration to zero, gaining ``a² / 2J`` of speed (ruckig's velocity interface does
+    not keep the velocity limit there). For the run-up pass the reversed state (-v, a).
     """
     gain = np.where(v * a > 0.0, a * a / (2.0 * limits.jerk), 0.0)
-    speed = np.abs(v)
-    lo = np.zeros(N_AXES)
-    hi = np.maximum(1.0, (speed + gain) / limits.velocity) + 1.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        fits = speed / mid + gain / mid**4 <= limits.velocity
-        hi = np.where(fits, mid, hi)
-        lo = np.where(fits, lo, mid)
-    out: Array = np.where(speed + gain > 0.0, hi, 0.0)
+    out: Array = np.abs(v) + gain
     return out
 
 
@@ -202,11 +245,47 @@ def _edge_report(
     }
 
 
-def _edge_position_check(move: _Move, limits: Limits, what: str, frame: int) -> None:
+@dataclass(frozen=True)
+class EdgeProblem:
+    """Why a run-up or run-out does not fit: ``text`` (one line), the ``axis`` index,
+    ``side`` (``"run-up"`` or ``"run-out"``), the film ``frame`` it joins and ``kind``
+    (``"position"``: it needs room beyond a limit, ``"velocity"``, or ``"plan"``: ruckig
+    found no move)."""
+
+    text: str
+    axis: int
+    side: str
+    frame: int
+    kind: str
+
+
+def velocity_problem(v: Array, a: Array, limits: Limits, side: str,
+                     frame: int) -> EdgeProblem | None:
+    """The run-out from state (v, a) (the run-up: pass (-v, a)) if its stop goes beyond a
+    velocity limit."""
+    peak = stop_peak_velocity(v, a, limits)
+    over = peak / limits.velocity
+    if not np.any(over > 1.0 + LIMIT_RTOL):
+        return None
+    j = int(np.argmax(over))
+    revolute = bool(limits.revolute[j])
+    what = (f"the run-up into frame {frame}" if side == "run-up"
+            else f"the run-out from frame {frame}")
+    text = (
+        f"{what} would need {limits.names[j]} velocity "
+        f"{fmt(float(peak[j]), 'velocity', revolute)}, beyond "
+        f"{fmt(float(limits.velocity[j]), 'velocity', revolute)} (the shot "
+        f"{'starts' if side == 'run-up' else 'ends'} still accelerating near that speed)"
+    )
+    return EdgeProblem(text, j, side, frame, "velocity")
+
+
+def room_problem(move: _Move, limits: Limits, side: str, frame: int) -> EdgeProblem | None:
+    """The move if it needs room beyond a position limit."""
     tol = LIMIT_RTOL * (limits.upper - limits.lower)
     over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
     if over.size == 0:
-        return
+        return None
     revolute = limits.revolute
     parts = []
     for j in over.tolist():
@@ -218,12 +297,55 @@ def _edge_position_check(move: _Move, limits: Limits, what: str, frame: int) -> 
             f"beyond its {'upper' if beyond_upper else 'lower'} limit "
             f"{fmt(float(bound), 'position', bool(revolute[j]))}"
         )
-    msg = (
-        f"the {what} {'into' if what == 'run-up' else 'from'} frame {frame} "
+    text = (
+        f"the {side} {'into' if side == 'run-up' else 'from'} frame {frame} "
         f"({move.duration:.2f} s) needs more room: " + "; ".join(parts)
-        + "; move the shot away from the limit or slow it down at that end"
     )
-    raise TimingLimitError(msg)
+    return EdgeProblem(text, int(over[0]), side, frame, "position")
+
+
+def _edge_position_check(move: _Move, limits: Limits, side: str, frame: int) -> None:
+    problem = room_problem(move, limits, side, frame)
+    if problem is not None:
+        msg = problem.text + "; move the shot away from the limit or slow it down at that end"
+        raise TimingLimitError(msg)
+
+
+def edge_problem(
+    first: tuple[Array, Array, Array], last: tuple[Array, Array, Array], limits: Limits,
+    frames: tuple[int, int], start: Array | None = None,
+) -> EdgeProblem | None:
+    """Whether the run-up into state ``first`` and the run-out from state ``last`` (each
+    (p, v, a)) fit ``limits`` (velocity and position; ruckig keeps acceleration and jerk):
+    the first problem found, or None. Plans the moves, samples nothing."""
+    p, v, a = first
+    if start is not None or not _at_rest(v, a, limits):
+        problem = velocity_problem(-v, a, limits, "run-up", frames[0])
+        if problem is not None:
+            return problem
+        try:
+            if start is None:
+                move = _stop_move(p, -v, a, limits)
+            else:
+                zero = np.zeros(N_AXES)
+                move = _Move((start, zero, zero), (p, v, a), limits, stop=False,
+                             what="the run-up from the start position")
+        except TimingLimitError as exc:
+            return EdgeProblem(str(exc), 0, "run-up", frames[0], "plan")
+        problem = room_problem(move, limits, "run-up", frames[0])
+        if problem is not None:
+            return problem
+    p, v, a = last
+    if not _at_rest(v, a, limits):
+        problem = velocity_problem(v, a, limits, "run-out", frames[1])
+        if problem is not None:
+            return problem
+        try:
+            move = _stop_move(p, v, a, limits)
+        except TimingLimitError as exc:
+            return EdgeProblem(str(exc), 0, "run-out", frames[1], "plan")
+        return room_problem(move, limits, "run-out", frames[1])
+    return None
 
 
 def runup(p: Array, v: Array, a: Array, limits: Limits, step: float, frame: int) -> Edge:

@@ -157,6 +157,9 @@ class TimingLimitError(LimitError):
         violations: The limits exceeded, worst first.
         max_speed: See :attr:`TimingReport.max_speed` (nan when not known).
         feasible_fps: See :attr:`TimingReport.feasible_fps` (nan when not known).
+        scale_factor: The slow-down ``--timing scale`` takes for this shot (it was run and
+            succeeded); inf when it fails too (or cannot help, as for a position limit);
+            nan when not known.
     """
 
     def __init__(
@@ -166,11 +169,13 @@ class TimingLimitError(LimitError):
         violations: list[LimitViolation] | None = None,
         max_speed: float = math.nan,
         feasible_fps: float = math.nan,
+        scale_factor: float = math.nan,
     ) -> None:
         super().__init__(message)
         self.violations = violations or []
         self.max_speed = max_speed
         self.feasible_fps = feasible_fps
+        self.scale_factor = scale_factor
 
 
 @dataclass(frozen=True, eq=False)
@@ -322,17 +327,13 @@ def fmt(value: float, quantity: str, revolute: bool) -> str:
 def shot_error(
     violations: list[LimitViolation], max_speed: float, fps: float
 ) -> TimingLimitError:
+    """The error for frames beyond a position limit (``violations`` holds at least one; the
+    others are listed too): no retiming can fix it."""
     parts = [v.describe() for v in violations[:4]]
     if len(violations) > 4:
         parts.append(f"and {len(violations) - 4} more")
-    msg = "; ".join(parts)
-    if any(v.quantity == "position" for v in violations):
-        msg += "; no retiming can fix a position limit"
-    else:
-        pct = math.floor(max_speed * 100.0)
-        fit_fps = math.floor(fps * max_speed * 10.0) / 10.0
-        msg += f"; the move fits at {pct}% speed ({fit_fps:.1f} fps) - try --timing scale"
+    msg = "; ".join(parts) + "; no retiming can fix a position limit"
     return TimingLimitError(
-        msg, violations=violations, max_speed=max_speed, feasible_fps=fps * max_speed
+        msg, violations=violations, max_speed=max_speed, feasible_fps=fps * max_speed,
+        scale_factor=math.inf,
     )
-

@@ -5,10 +5,11 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
 
 * **Quintic, C4.** The jerk is checked, so it must be meaningful: a quintic spline has
   continuous jerk and snap (a cubic's jerk is piecewise constant and jumps at every frame).
-* **Holds stay still.** Previs often holds an axis and then moves it; a global spline would
-  ring into the hold. Every axis is split at its still intervals (consecutive solutions within
-  :data:`HOLD_TOL`): those are straight lines (exactly constant for equal solutions), and every
-  moving stretch is its own spline, clamped to the hold's velocity and zero acceleration.
+* **Holds stay still.** A hold is a hold of the camera: a frame pair where every joint moves
+  by at most :data:`HOLD_TOL` (the whole robot still; optionally also where the caller says
+  the camera holds). There every axis is a straight line (exactly constant for equal
+  solutions) and every moving stretch is its own spline, clamped to the hold's velocity and
+  zero acceleration. One axis passing a turning point is no hold: it stays on the spline.
 * **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
   beyond the frames. The spline's velocity and acceleration there follow from the frames
   themselves; only its jerk is set, to that of a least-squares cubic through the end frames,
@@ -21,7 +22,9 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
   frames that are inside it, the velocity and acceleration at its two knots are changed as
   little as possible to bring the Bezier control points next to them inside (at a knot on
   the limit: stop there, curve back), those knots are clamped and the rest refitted. A piece
-  lies in the convex hull of its control points, so it then stays inside the range.
+  lies in the convex hull of its control points, so it then stays inside the range. A frame
+  beyond the range (by round-off, or a violation the checks report) widens the range of its
+  own pieces to that frame and no further.
 
 The constant coefficient of every piece is the frame solution itself, so the path passes
 exactly (bit for bit) through every frame. Time derivatives are ``d^k q/dx^k * (dx/dt)^k``.
@@ -45,8 +48,8 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-#: Two consecutive frame solutions closer than this [m or rad] count as "not moving": the path
-#: is a straight line between them (exactly constant when they are equal).
+#: Two consecutive frame solutions whose every joint is closer than this [m or rad] are a hold
+#: (the robot still): the path is a straight line between them (constant when they are equal).
 HOLD_TOL = 1e-9
 #: Frames of the least-squares cubic that gives the jerk at a free end.
 END_FRAMES = 6
@@ -81,6 +84,9 @@ class FramePath:
         still: Per axis, whether each frame interval is a straight (hold) line, (n - 1, 8).
         clamped_for_limits: Per axis, the knots whose derivatives were reduced to keep the
             path inside the position range, (n, 8).
+        piece_lo, piece_hi: The range each piece stays in, (n - 1, 8): the position range,
+            widened only to a frame that lies beyond it. Positions are clipped to it when
+            evaluated, which removes the evaluation's round-off (a few ulp) and nothing else.
     """
 
     coef: Array
@@ -88,13 +94,24 @@ class FramePath:
     dt: float
     still: BoolArray
     clamped_for_limits: BoolArray
+    piece_lo: Array
+    piece_hi: Array
 
     @classmethod
-    def fit(cls, q: Array, dt: float, lower: Array, upper: Array) -> FramePath:
-        """The path through frame solutions ``q`` (n, 8) inside ``[lower, upper]`` (8,)."""
+    def fit(cls, q: Array, dt: float, lower: Array, upper: Array,
+            hold: BoolArray | None = None) -> FramePath:
+        """The path through frame solutions ``q`` (n, 8) inside ``[lower, upper]`` (8,).
+
+        ``hold`` (n - 1,): the frame pairs where the camera holds still (default: every
+        pair). A pair is a hold when it is one and every joint moves by at most
+        :data:`HOLD_TOL` (the whole robot still); one axis passing a turning point is not.
+        """
         n, m = q.shape
         diff = np.diff(q, axis=0)
-        still = np.abs(diff) <= HOLD_TOL
+        robot_still = np.all(np.abs(diff) <= HOLD_TOL, axis=1)
+        if hold is not None:
+            robot_still &= hold
+        still = np.repeat(robot_still[:, None], m, axis=1)
         # A knot next to a hold is clamped to the hold's slope and zero acceleration.
         clamped = np.zeros((n, m), dtype=bool)
         v_given = np.zeros((n, m))
@@ -105,27 +122,36 @@ class FramePath:
         v_given[:-1] = np.where(still, diff, v_given[:-1])
         jerk = end_jerk(q, still)
         v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+        # Each knot's room: the range, widened to the frame itself where a frame lies beyond
+        # it (by round-off, or a violation the limit checks report): never further out.
+        lo, hi = np.minimum(lower, q), np.maximum(upper, q)
         limited = np.zeros((n, m), dtype=bool)
         for _ in range(_REFIT_ROUNDS):
-            out = _overshooting_knots(q, v, w, still, lower, upper) & ~limited
+            out = _overshooting_knots(q, v, w, still, lo, hi) & ~limited
             if not np.any(out):
                 break
-            v_in, w_in = _pulled_inside(q, v, w, lower, upper)
+            v_in, w_in = _pulled_inside(q, v, w, lo, hi)
             limited |= out
             clamped |= out
             v_given = np.where(out, v_in, v_given)
             w_given = np.where(out, w_in, w_given)
             v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
-        out = _overshooting_knots(q, v, w, still, lower, upper)
-        if np.any(out):  # still out after the refits: pull in without refitting
-            v_in, w_in = _pulled_inside(q, v, w, lower, upper)
+        # Still out after the refits: pull knots in without refitting until no piece leaves
+        # its range. A piece whose two knots are both pulled in is inside (convex hull), so
+        # this ends after at most n passes.
+        for _ in range(n):
+            out = _overshooting_knots(q, v, w, still, lo, hi)
+            if not np.any(out):
+                break
+            v_in, w_in = _pulled_inside(q, v, w, lo, hi)
             limited |= out
             v, w = np.where(out, v_in, v), np.where(out, w_in, w)
         coef = hermite_coefficients(q, v, w)
         # Holds are exact straight lines.
         coef[:, 1] = np.where(still, diff, coef[:, 1])
         coef[:, 2:] = np.where(still[:, None, :], 0.0, coef[:, 2:])
-        return cls(coef=coef, q_frames=q, dt=dt, still=still, clamped_for_limits=limited)
+        return cls(coef=coef, q_frames=q, dt=dt, still=still, clamped_for_limits=limited,
+                   piece_lo=np.minimum(lo[:-1], lo[1:]), piece_hi=np.maximum(hi[:-1], hi[1:]))
 
     @property
     def n(self) -> int:
@@ -144,6 +170,7 @@ class FramePath:
             for k in range(DEGREE - 1, d - 1, -1):
                 acc = acc * tau + c[:, k] * math.perm(k, d)
             out.append(acc)
+        out[0] = np.clip(out[0], self.piece_lo[idx], self.piece_hi[idx])
         out[0] = np.where((x >= self.n - 1)[:, None], self.q_frames[-1], out[0])
         on_knot = x == idx
         out[0][on_knot] = self.q_frames[idx[on_knot]]
@@ -164,6 +191,8 @@ class FramePath:
         end = fac @ self.coef[-1]  # tau = 1 on the last piece, (4, 8)
         out = [np.concatenate([np.matmul(basis[d], self.coef).reshape(-1, m), end[d : d + 1]])
                for d in range(4)]
+        pos = out[0][:-1].reshape(n - 1, ticks, m)
+        np.clip(pos, self.piece_lo[:, None], self.piece_hi[:, None], out=pos)
         out[0][::ticks] = self.q_frames
         return uniform_x(n, ticks), out
 
@@ -240,29 +269,30 @@ def end_jerk(q: Array, still: BoolArray) -> Array:
 
 
 def _overshooting_knots(
-    y: Array, v: Array, w: Array, still: BoolArray, lower: Array, upper: Array
+    y: Array, v: Array, w: Array, still: BoolArray, lo: Array, hi: Array
 ) -> BoolArray:
-    """Knots of the moving pieces that leave ``[lower, upper]`` between their frames, (n, 8).
+    """Knots of the moving pieces that leave their range between their frames, (n, 8).
 
-    The Bernstein (Bezier) control points of a piece bound it (convex hull); only pieces
-    whose control points poke out are solved exactly for their extremes (the roots of the
-    derivative). Pieces with a frame outside the range are left to the limit checks.
+    ``lo``, ``hi`` (n, 8): each knot's range; a piece's range is the union of its two
+    knots'. The Bernstein (Bezier) control points of a piece bound it (convex hull); only
+    pieces whose control points poke out are solved exactly for their extremes (the roots of
+    the derivative).
     """
     n, m = y.shape
+    p_lo, p_hi = np.minimum(lo[:-1], lo[1:]), np.maximum(hi[:-1], hi[1:])
     pts = np.stack([y[:-1], y[:-1] + v[:-1] / 5.0, y[:-1] + 0.4 * v[:-1] + w[:-1] / 20.0,
                     y[1:] - 0.4 * v[1:] + w[1:] / 20.0, y[1:] - v[1:] / 5.0, y[1:]])
-    ends_inside = ((pts[0] >= lower) & (pts[0] <= upper) & (pts[5] >= lower)
-                   & (pts[5] <= upper))
-    maybe = ~still & ends_inside & ((pts.max(axis=0) > upper) | (pts.min(axis=0) < lower))
+    maybe = ~still & ((pts.max(axis=0) > p_hi) | (pts.min(axis=0) < p_lo))
     out = np.zeros((n, m), dtype=bool)
     for i, j in zip(*np.nonzero(maybe), strict=True):
         c = hermite_coefficients(y[i : i + 2, j : j + 1], v[i : i + 2, j : j + 1],
                                  w[i : i + 2, j : j + 1])[0, :, 0]
         deriv = np.arange(1, DEGREE + 1) * c[1:]  # increasing powers
         roots = np.roots(deriv[::-1]) if np.any(deriv[1:] != 0.0) else np.zeros(0)
-        tau = roots.real[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < 1)]
+        # Near-double roots (an extreme touching the limit) come out slightly complex.
+        tau = roots.real[(np.abs(roots.imag) < 1e-6) & (roots.real > 0) & (roots.real < 1)]
         values = np.polynomial.polynomial.polyval(tau, c)
-        if np.any(values > upper[j]) or np.any(values < lower[j]):
+        if np.any(values > p_hi[i, j]) or np.any(values < p_lo[i, j]):
             out[i, j] = out[i + 1, j] = True
     return out
 
@@ -271,7 +301,7 @@ def _pulled_inside(
     y: Array, v: Array, w: Array, lower: Array, upper: Array
 ) -> tuple[Array, Array]:
     """Knot derivatives changed as little as possible so that the four control points next
-    to each knot are inside ``[lower, upper]``.
+    to each knot are inside ``[lower, upper]`` (per knot, (n, 8), containing the knot).
 
     The control points of a piece from (y0, v0, w0) to (y1, v1, w1) are y0, y0 + v0/5,
     y0 + 2 v0/5 + w0/20, y1 - 2 v1/5 + w1/20, y1 - v1/5, y1. Next to a knot that leaves

@@ -7,19 +7,30 @@ Units: SI throughout (m, rad, s).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.timing.edges import runout, runup, runup_from, stop_slowdown
+from camtraj.timing.edges import (
+    EDGE_MODES,
+    Edge,
+    EdgeProblem,
+    edge_limits,
+    edge_problem,
+    runout,
+    runup,
+    runup_from,
+)
 from camtraj.timing.limits import (
     LIMIT_RTOL,
     N_AXES,
     FrameMap,
     Limits,
     LimitViolation,
+    Peaks,
     TimingLimitError,
     fmt,
     peak_use,
@@ -32,10 +43,14 @@ from camtraj.timing.path import FramePath, Samples
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 MODES: tuple[str, ...] = ("shot", "scale", "optimal")
 #: Film frame times may deviate from a uniform grid by this fraction of the frame interval.
 UNIFORM_RTOL = 1e-6
+#: ``"scale"`` slows a move by at most this factor; a move whose run-up or run-out still has
+#: no room then has an axis at its limit moving into it (only another IK answer helps).
+MAX_SCALE = 1000.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,8 +67,9 @@ class TimingReport:
         max_speed: Maximum feasible speed as a fraction of real time, from the shot's own
             (real-time) timing: 1.0 means the shot's timing just fits, 0.5 that the robot can
             only do it at half speed, 2.0 that it could go twice as fast. Velocity scales with
-            the speed, acceleration with its square, jerk with its cube. ``inf`` if nothing
-            moves.
+            the speed, acceleration with its square, jerk with its cube; the run-up and
+            run-out must fit too (their room and speed). ``inf`` if nothing moves, 0 if no
+            uniform slow-down fits.
         feasible_fps: The frame rate at which the move could be shot at ``max_speed``
             (``fps * max_speed``) [frames/s], for a later speed change in post.
         limiting: Every (axis, quantity) the shot's own real-time timing exceeds (what forces
@@ -64,7 +80,9 @@ class TimingReport:
             ``hold`` [s] at rest before it (so the first frame lands on a servo tick),
             ``start`` axis -> start position [m or rad], ``travel`` axis -> first-frame
             position minus start position, ``extent`` axis -> max - min position during the
-            move (how much track it needs before the first frame).
+            move (how much track it needs before the first frame), ``peak_use`` axis ->
+            quantity -> fraction of the limit used by the move's samples (velocity,
+            acceleration, jerk; see ``peak_use``), ``edges`` ``"gentle"`` or ``"fast"``.
         runout: The same for the move from the last frame to rest (``end`` instead of
             ``start``, ``travel`` = end - last-frame position, ``hold`` at rest after it).
         warnings: Things a person should know that do not stop the take.
@@ -148,6 +166,8 @@ def time_shot(
     rate: float = 250.0,
     frame_numbers: ArrayLike | None = None,
     start: ArrayLike | None = None,
+    hold: ArrayLike | None = None,
+    edges: str = "gentle",
 ) -> Take:
     """Time a joint path for the robot: from rest, through every film frame, to rest.
 
@@ -158,7 +178,8 @@ def time_shot(
         limits: The robot's limits.
         mode: ``"shot"`` keeps the film's timing and raises :class:`TimingLimitError` if a
             limit is exceeded; ``"scale"`` slows the whole move by the smallest uniform factor
-            that fits velocity, acceleration and jerk; ``"optimal"`` retimes the path
+            at which the shot and its run-up and run-out fit every limit (position,
+            velocity, acceleration and jerk); ``"optimal"`` retimes the path
             time-optimally under velocity and acceleration limits (toppra), keeping still
             stretches as holds of their original duration.
         rate: Requested servo rate [Hz].
@@ -167,6 +188,13 @@ def time_shot(
         start: Joint vector the robot stands at when the take begins [m, rad], shape (8,);
             the run-up moves from it (at rest) into the first frame's state. Default: the
             take begins at rest wherever the shortest run-up into the first frame starts.
+        hold: Per frame pair, shape (n - 1,): whether the camera holds still there. A pair
+            is a hold (the robot exactly still) where the camera holds and no joint moves
+            by more than :data:`~camtraj.timing.path.HOLD_TOL`; default: wherever no joint
+            moves.
+        edges: ``"gentle"`` run-up and run-out use per axis no more of the acceleration
+            and jerk limits than the shot does (at least a quarter of them); ``"fast"``
+            ones the full limits.
 
     Returns:
         The :class:`Take`.
@@ -181,33 +209,48 @@ def time_shot(
     q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate)
     n = q.shape[0]
     fps = 1.0 / dt
-    path = FramePath.fit(q, dt, limits.lower, limits.upper)
+    hold_mask = _validate_hold(hold, n)
+    if edges not in EDGE_MODES:
+        msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
+        raise ValueError(msg)
+    start_q = None if start is None else _validate_start(start)
+    path = FramePath.fit(q, dt, limits.lower, limits.upper, hold_mask)
 
     # The shot's own timing, sampled at the servo rate: limits, max speed.
     ticks0 = max(1, round(rate * dt))
     rt_x, rt, rt_checked, rt_checked_x = _grid_samples(path, ticks0, fps)
-    edge_need = _edge_slowdown(rt, limits)
-    need = max(slowdown(rt_checked, limits), float(edge_need.max()))
-    max_speed = 1.0 / need if need > 0 else math.inf
+    fit = _EdgeFit.of(path, rt, limits, edges, start_q, frames)
+    # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
+    shot_need = slowdown(rt_checked, limits)
+    need = fit.factor(shot_need)
+    max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
     limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
     position_bad = [v for v in limiting if v.quantity == "position"]
-
-    if mode == "shot" and limiting:
-        raise shot_error(limiting, max_speed, fps)
-    if mode == "shot" and edge_need.max() > 1.0 + LIMIT_RTOL:
-        raise _edge_error(rt, edge_need, limits, frames, max_speed, fps)
     if position_bad:
-        raise shot_error(position_bad, max_speed, fps)
+        raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
+
+    if mode == "optimal" and not math.isfinite(need):
+        need = shot_need  # no uniform slow-down has room; a retime may still end at rest
+
+    def scaled() -> tuple[float, int, Samples, Array, Edge, Edge]:
+        return _scale(path, dt, rate, limits, need, fit, start_q)
 
     warnings: list[str] = []
     exceeded: list[LimitViolation] = []
     if mode == "shot":
+        problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
+        if limiting or problem is not None:
+            raise _shot_mode_error(limiting, problem, max_speed, fps, scaled)
         shot, shot_x, speed_factor, ticks = rt, rt_x, 1.0, ticks0
         shot_rate = ticks0 * fps
         shot_t = np.arange(rt_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
+        try:
+            up, out = _build_edges(shot, limits, edges, start_q, 1.0 / shot_rate, frames)
+        except TimingLimitError as exc:  # a grid effect at the margin: say what scale does
+            raise _shot_mode_error([], None, max_speed, fps, scaled, str(exc)) from None
     elif mode == "scale":
-        speed_factor, ticks, shot, shot_x = _scale(path, dt, rate, limits, need)
+        speed_factor, ticks, shot, shot_x, up, out = scaled()
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
@@ -232,16 +275,11 @@ def time_shot(
                 f"{v.describe()} (optimal timing does not bound jerk; "
                 "use --timing scale for a jerk-limited take)"
             )
+    if mode == "optimal":
+        up, out = _build_edges(shot, limits, edges, start_q, 1.0 / rate, frames)
 
     # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
     step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
-    if start is None:
-        up = runup(shot.q[0], shot.qd[0], shot.qdd[0], limits, step, frames[0])
-    else:
-        up = runup_from(np.asarray(start, dtype=np.float64), shot.q[0], shot.qd[0],
-                        shot.qdd[0], limits, step, frames[0])
-    out = runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], limits, step, frames[-1])
-
     n_up = up.q.shape[0]
     m = n_up + shot.q.shape[0] + out.q.shape[0]
     if mode == "optimal":
@@ -372,49 +410,190 @@ def _grid_samples(path: FramePath, ticks: int, speed: float) -> tuple[Array, Sam
     return x, stream, checked, checked_x
 
 
-def _edge_slowdown(s: Samples, limits: Limits) -> Array:
-    """The slow-down the run-up (row 0) and run-out (row 1) need for velocity, (2, 8)."""
-    return np.stack([stop_slowdown(-s.qd[0], s.qdd[0], limits),
-                     stop_slowdown(s.qd[-1], s.qdd[-1], limits)])
+def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
+    if hold is None:
+        return None
+    mask = np.asarray(hold)
+    if mask.shape != (n - 1,) or mask.dtype != np.bool_:
+        msg = f"hold must be {n - 1} booleans (one per frame pair), got {mask.shape} {mask.dtype}"
+        raise ValueError(msg)
+    return mask
 
 
-def _edge_error(s: Samples, need: Array, limits: Limits, frames: IntArray, max_speed: float,
-                fps: float) -> TimingLimitError:
-    side, j = (int(i) for i in np.unravel_index(int(np.argmax(need)), need.shape))
-    k = 0 if side == 0 else -1
-    v, a = float(s.qd[k, j]), float(s.qdd[k, j])
-    peak = abs(v) + a * a / (2.0 * float(limits.jerk[j]))
-    revolute = bool(limits.revolute[j])
-    what = (f"the run-up into frame {frames[0]}" if side == 0
-            else f"the run-out from frame {frames[-1]}")
-    pct = math.floor(max_speed * 100.0)
-    limit = fmt(float(limits.velocity[j]), "velocity", revolute)
-    msg = (
-        f"{what} would need {limits.names[j]} velocity "
-        f"{fmt(peak, 'velocity', revolute)}, beyond {limit}"
-        f" (the shot {'starts' if side == 0 else 'ends'} still accelerating near that speed)"
-        f"; the move fits at {pct}% speed - try --timing scale"
-    )
-    return TimingLimitError(msg, max_speed=max_speed, feasible_fps=fps * max_speed)
+def _validate_start(start: ArrayLike) -> Array:
+    arr = np.array(start, dtype=np.float64)
+    if arr.shape != (N_AXES,) or not np.all(np.isfinite(arr)):
+        msg = f"start must be {N_AXES} finite joint values, got {arr.tolist()}"
+        raise ValueError(msg)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class _EdgeFit:
+    """Whether the run-up and run-out fit when the shot is slowed uniformly by a factor s.
+
+    The boundary states scale as (q, qd / s, qdd / s²) and the shot's peak acceleration and
+    jerk (which bound gentle edges) as 1 / s², 1 / s³; the edges are planned by ruckig at
+    each factor tried (nothing is sampled).
+    """
+
+    ends: tuple[tuple[Array, Array, Array], tuple[Array, Array, Array]]  # real-time states
+    peak_acc: Array  # the real-time shot's peak |acceleration| per axis
+    peak_jerk: Array
+    limits: Limits
+    edges: str
+    start: Array | None
+    frames: tuple[int, int]
+
+    @classmethod
+    def of(cls, path: FramePath, rt: Samples, limits: Limits, edges: str, start: Array | None,
+           frames: IntArray) -> _EdgeFit:
+        ends = ((rt.q[0], rt.qd[0], rt.qdd[0]), (rt.q[-1], rt.qd[-1], rt.qdd[-1]))
+        peaks = Peaks.of(rt)
+        return cls(ends, peaks.qdd, peaks.qddd, limits, edges, start,
+                   (int(frames[0]), int(frames[-1])))
+
+    def problem(self, s: float) -> EdgeProblem | None:
+        """What does not fit at slow-down ``s`` (None: both edges fit)."""
+        (p0, v0, a0), (p1, v1, a1) = self.ends
+        first = (p0, v0 / s, a0 / s**2)
+        last = (p1, v1 / s, a1 / s**2)
+        lim = edge_limits(self.limits, self.peak_acc / s**2, self.peak_jerk / s**3, self.edges)
+        return edge_problem(first, last, lim, self.frames, self.start)
+
+    def factor(self, low: float) -> float:
+        """The smallest slow-down >= ``low`` at which both edges fit (``low`` itself when
+        they do; inf when they do not even :data:`MAX_SCALE` times slower than real time).
+
+        Bracketed by doubling, then bisected (the room an edge needs never grows as the
+        move slows: its states and gentle limits scale together until the floor holds the
+        limits, then its stopping distance shrinks)."""
+        if low <= 0.0:
+            return low  # nothing moves: the take is a hold
+        if self.problem(low) is None:
+            return low
+        lo, hi = low, 2.0 * low
+        while self.problem(hi) is not None:
+            if hi >= MAX_SCALE:
+                return math.inf
+            lo, hi = hi, min(2.0 * hi, MAX_SCALE)
+        while hi / lo - 1.0 > 1e-6:
+            mid = math.sqrt(lo * hi)
+            if self.problem(mid) is None:
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+    def no_room(self) -> str:
+        """Why no slower take fits: the edge still short of room at :data:`MAX_SCALE`."""
+        problem = self.problem(MAX_SCALE)
+        if problem is None or problem.kind != "position":  # pragma: no cover - defensive
+            return f"no take up to {MAX_SCALE:g}x slower fits its run-up and run-out"
+        j = problem.axis
+        (p0, v0, _), (p1, v1, _) = self.ends
+        lim = self.limits
+        pos, vel = (p0[j], -v0[j]) if problem.side == "run-up" else (p1[j], v1[j])
+        bound, side = (lim.upper[j], "upper") if vel > 0 else (lim.lower[j], "lower")
+        rev = bool(lim.revolute[j])
+        what = ("the run-up into" if problem.side == "run-up" else "the run-out from")
+        return (
+            f"{what} frame {problem.frame} has no room even {MAX_SCALE:g}x slower: "
+            f"{lim.names[j]} is {fmt(float(abs(bound - pos)), 'position', rev)} from its "
+            f"{side} limit {fmt(float(bound), 'position', rev)} and "
+            f"{'arrives from' if problem.side == 'run-up' else 'moves towards'} it there; "
+            "the IK must leave room at that end"
+        )
+
+
+def _edge_use(edge: Edge, limits: Limits) -> dict[str, dict[str, float]]:
+    """Peak use of the velocity, acceleration and jerk limits by a run-up or run-out."""
+    out: dict[str, dict[str, float]] = {}
+    for j, name in enumerate(limits.names):
+        out[name] = {
+            quantity: float(np.max(np.abs(values[:, j]), initial=0.0) / bound[j])
+            for quantity, values, bound in (("velocity", edge.qd, limits.velocity),
+                                            ("acceleration", edge.qdd, limits.acceleration),
+                                            ("jerk", edge.qddd, limits.jerk))
+        }
+    return out
+
+
+def _build_edges(shot: Samples, limits: Limits, edges: str, start: Array | None, step: float,
+                 frames: IntArray) -> tuple[Edge, Edge]:
+    """The run-up into the shot's first sample and the run-out from its last, on a servo
+    grid of ``step``; gentle edges within the shot's own peak acceleration and jerk."""
+    peaks = Peaks.of(shot)
+    lim = edge_limits(limits, peaks.qdd, peaks.qddd, edges)
+    if start is None:
+        up = runup(shot.q[0], shot.qd[0], shot.qdd[0], lim, step, int(frames[0]))
+    else:
+        up = runup_from(start, shot.q[0], shot.qd[0], shot.qdd[0], lim, step, int(frames[0]))
+    out = runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], lim, step, int(frames[-1]))
+    for edge in (up, out):
+        edge.report["peak_use"] = _edge_use(edge, limits)
+        edge.report["edges"] = edges
+    return up, out
+
+
+def _shot_mode_error(
+    limiting: list[LimitViolation], problem: EdgeProblem | None, max_speed: float, fps: float,
+    scaled: Callable[[], tuple[float, int, Samples, Array, Edge, Edge]], text: str = "",
+) -> TimingLimitError:
+    """Why the shot's own timing does not fit, and what ``--timing scale`` does about it
+    (it is run to find out: the advice is only given when scale succeeds)."""
+    try:
+        factor = scaled()[0]
+    except TimingLimitError as exc:
+        advice, factor = f"--timing scale does not fit it either: {exc}", math.inf
+    else:
+        pct = math.floor(100.0 / factor)
+        fit_fps = math.floor(fps / factor * 10.0) / 10.0
+        advice = f"the move fits at {pct}% speed ({fit_fps:.1f} fps) - try --timing scale"
+    parts = [v.describe() for v in limiting[:4]]
+    if len(limiting) > 4:
+        parts.append(f"and {len(limiting) - 4} more")
+    if problem is not None:
+        parts.append(problem.text)
+    if text:
+        parts.append(text)
+    return TimingLimitError("; ".join([*parts, advice]), violations=limiting,
+                            max_speed=max_speed, feasible_fps=fps * max_speed,
+                            scale_factor=factor)
 
 
 def _scale(
-    path: FramePath, dt: float, rate: float, limits: Limits, factor: float
-) -> tuple[float, int, Samples, Array]:
-    """Slow the move uniformly by the smallest factor >= 1 that fits (resampled and verified).
+    path: FramePath, dt: float, rate: float, limits: Limits, factor: float, fit: _EdgeFit,
+    start: Array | None,
+) -> tuple[float, int, Samples, Array, Edge, Edge]:
+    """Slow the move uniformly by the smallest factor >= 1 at which the shot and its run-up
+    and run-out fit; resampled, and the edges built and checked at that factor.
 
-    Velocity scales with 1/s, acceleration with 1/s², jerk with 1/s³, so the factor follows
-    from the real-time peaks. The take's grid has different sample points from the real-time
-    check (ticks per frame change with s), so the stream is resampled and the factor raised
-    if a sample of the resampled stream still exceeds a limit.
+    ``factor`` is where the real-time check and the edge planning say everything fits. The
+    take's grid has other sample points (ticks per frame change with the factor), so the
+    factor is raised if a resampled sample still exceeds a limit or an edge built from the
+    resampled stream (whose peaks bound gentle edges) still lacks room.
     """
+    if not math.isfinite(factor):
+        msg = fit.no_room()
+        raise TimingLimitError(msg, max_speed=0.0, feasible_fps=0.0, scale_factor=math.inf)
     s = max(1.0, factor)
-    for _ in range(20):
+    frames = np.array(fit.frames, dtype=np.int64)
+    for _ in range(40):
         ticks = max(1, round(rate * s * dt))
         x, samples, checked, _ = _grid_samples(path, ticks, 1.0 / (s * dt))
-        k = max(slowdown(checked, limits), float(_edge_slowdown(samples, limits).max()))
-        if k <= 1.0 + LIMIT_RTOL:
-            return s, ticks, samples, x
-        s *= k * (1.0 + 1e-12)
+        k = slowdown(checked, limits)
+        if k > 1.0 + LIMIT_RTOL:
+            s *= k * (1.0 + 1e-12)
+            continue
+        try:
+            up, out = _build_edges(samples, limits, fit.edges, start, s * dt / ticks, frames)
+        except TimingLimitError as exc:
+            if s >= MAX_SCALE:
+                raise TimingLimitError(fit.no_room(), max_speed=0.0, feasible_fps=0.0,
+                                       scale_factor=math.inf) from exc
+            s = min(MAX_SCALE, s * 1.001)
+            continue
+        return s, ticks, samples, x, up, out
     msg = "internal error: the scale factor did not settle"  # pragma: no cover
     raise RuntimeError(msg)  # pragma: no cover
