@@ -17,7 +17,7 @@ from camtraj.ik.shot import Candidates, candidates, choose, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.robot import Robot
-from camtraj.timing import Limits, TimingLimitError, time_shot
+from camtraj.timing import Limits, feasible_speed
 
 Array = NDArray[np.float64]
 
@@ -203,12 +203,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     times = np.arange(n) * dt
 
     def take_speed(q: Array) -> float:
-        try:
-            return time_shot(q, times, limits, mode="shot").report.max_speed
-        except TimingLimitError as exc:
-            return exc.max_speed if math.isfinite(exc.max_speed) else 0.0
-        except ValueError:  # fewer than two frames
-            return math.inf
+        return feasible_speed(q, times, limits) if n > 1 else math.inf
 
     ref = refine(robot, cost, targets, choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
                  np.maximum(hi1, x0[:, 0]), rounds=max(25, s.refine_rounds),

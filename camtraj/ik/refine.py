@@ -109,7 +109,6 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
              branch: IntArray, x: Array, y: Array, rounds: int,
              tolerance: float) -> tuple[Array, Array, int]:
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged."""
-    n = x.shape[0]
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
     j = cost.refine_total(y)
@@ -199,12 +198,12 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
     kappa = (s / p) * max(phi, 1e-300) ** (1.0 / p - 1.0)
     lims = (cost.vel, cost.acc, cost.jerk)
     for op, z in usages:
-        e = p / op.order
+        ex = p / op.order
         c = s ** op.order
         a = np.abs(z) / c
         lim = lims[op.order - 1]
-        dz = kappa * e * a ** (e - 1.0) * np.sign(z) / (c * lim)
-        w = kappa * e * (e - 1.0) * a ** (e - 2.0) / (c * c * lim * lim)
+        dz = kappa * ex * a ** (ex - 1.0) * np.sign(z) / (c * lim)
+        w = kappa * ex * (ex - 1.0) * a ** (ex - 2.0) / (c * c * lim * lim)
         _gather(op.coef, op.offset, dz, w, gq, M, pad)
     if n >= 3:  # the ends' stopping needs: one row per end and axis
         need, d1, d2, rows = cost.edge_needs(q)

@@ -33,8 +33,8 @@ from camtraj.ik.closed_form import (
     IDX,
     N_BRANCHES,
     TILT,
-    TWO_PI,
     TRACK,
+    TWO_PI,
     packed_limits,
     six_axis_branch,
     six_axis_packed,
@@ -288,7 +288,7 @@ def lanes(y: Array, lower: Array, upper: Array, start: Array) -> Array:
     best (nearest ``start`` among equals) and folded back inside where it still leaves them.
     """
     out = y.copy()
-    n, g, b, _ = y.shape
+    g, b = y.shape[1:3]
     for i in np.flatnonzero(REVOLUTE):
         col = np.unwrap(y[..., i], axis=0)  # (n, G, 8)
         best_key = np.full((g, b), np.inf)

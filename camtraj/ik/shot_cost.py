@@ -157,7 +157,7 @@ class ShotCost:
         """Smooth stand-in for :meth:`peak`: ``scale * (sum (u / scale)^power)^(1/power)``
         over every axis and evaluation point, with u = |v|, |a|^(1/2), |j|^(1/3), and the
         ends' stopping needs."""
-        return self.scale * self.peak_sum(q) ** (1.0 / self.power)
+        return float(self.scale * self.peak_sum(q) ** (1.0 / self.power))
 
     def peak_sum(self, q: Array) -> float:
         """The sum inside :meth:`peak_norm`."""
@@ -185,7 +185,7 @@ class ShotCost:
                                          @ self.motion_coef).sum()) / (n - 1)
             slow = max(1.0, self.peak(q))
             j += self.refine_edge(q[0], q[1], slow) + self.refine_edge(q[-1], q[-2], slow)
-        return j
+        return float(j)
 
     def refine_edge(self, q_edge: Array, q_inner: Array, slow: float) -> float:
         """Run-up / run-out room at an end frame, the take running ``slow`` times slower:

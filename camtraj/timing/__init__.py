@@ -27,7 +27,7 @@ Units: SI throughout (m, rad, s); error messages show revolute axes in degrees.
 """
 
 from camtraj.timing.limits import QUANTITIES, Limits, LimitViolation, TimingLimitError
-from camtraj.timing.take import MODES, Take, TimingReport, time_shot
+from camtraj.timing.take import MODES, Take, TimingReport, feasible_speed, time_shot
 
 __all__ = [
     "MODES",
@@ -37,5 +37,6 @@ __all__ = [
     "Take",
     "TimingLimitError",
     "TimingReport",
+    "feasible_speed",
     "time_shot",
 ]

@@ -214,16 +214,11 @@ def time_shot(
         msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
         raise ValueError(msg)
     start_q = None if start is None else _validate_start(start)
-    path = FramePath.fit(q, dt, limits.lower, limits.upper, hold_mask)
-
-    # The shot's own timing, sampled at the servo rate: limits, max speed.
-    ticks0 = max(1, round(rate * dt))
-    rt_x, rt, rt_checked, rt_checked_x = _grid_samples(path, ticks0, fps)
-    fit = _EdgeFit.of(path, rt, limits, edges, start_q, frames)
-    # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
-    shot_need = slowdown(rt_checked, limits)
-    need = fit.factor(shot_need)
-    max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
+    real = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames)
+    path, rt_x, rt, rt_checked, rt_checked_x = (real.path, real.x, real.stream, real.checked,
+                                                real.checked_x)
+    fit, shot_need, need, max_speed = real.fit, real.shot_need, real.need, real.max_speed
+    ticks0 = real.ticks
     limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
     position_bad = [v for v in limiting if v.quantity == "position"]
     if position_bad:
@@ -341,6 +336,51 @@ def time_shot(
 # ---------------------------------------------------------------------------------------------
 # Input checks
 # ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _RealTime:
+    """The shot at its own timing, sampled at the servo rate, and the slow-down it needs."""
+
+    path: FramePath
+    ticks: int
+    x: Array
+    stream: Samples
+    checked: Samples
+    checked_x: Array
+    fit: _EdgeFit
+    shot_need: float
+    need: float
+    max_speed: float
+
+    @classmethod
+    def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
+           edges: str, start: Array | None, frames: IntArray) -> _RealTime:
+        path = FramePath.fit(q, dt, limits.lower, limits.upper, hold)
+        ticks = max(1, round(rate * dt))
+        x, stream, checked, checked_x = _grid_samples(path, ticks, 1.0 / dt)
+        fit = _EdgeFit.of(path, stream, limits, edges, start, frames)
+        # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
+        shot_need = slowdown(checked, limits)
+        need = fit.factor(shot_need)
+        max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
+        return cls(path, ticks, x, stream, checked, checked_x, fit, shot_need, need, max_speed)
+
+
+def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
+                   rate: float = 250.0, hold: ArrayLike | None = None,
+                   edges: str = "gentle") -> float:
+    """The maximum feasible speed :func:`time_shot` reports for a joint path (its
+    ``TimingReport.max_speed``, the same computation), without timing a take: 0 where a
+    position limit is crossed at the shot's own timing (no speed fixes that) or no slower
+    take fits the run-up and run-out; inf where nothing moves."""
+    q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate)
+    rt = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
+                      frames)
+    if any(v.quantity == "position" for v in
+           violations(rt.checked, limits, FrameMap.of(rt.checked_x, frames), LIMIT_RTOL)):
+        return 0.0
+    return rt.max_speed
 
 
 def _validate(
