@@ -574,7 +574,7 @@ def _file_stem(name: str) -> str:
 
 #: Where the short end-in-motion moves happen: camera x [m] and the way out (+1: towards the
 #: track's far end, -1: towards its start).
-TRACK_SPOTS = {"start": (-1.0, -1.0), "middle": (6.0, 1.0), "end": (15.0, 1.0)}
+TRACK_SPOTS = {"start": (-3.8, -1.0), "middle": (6.0, 1.0), "end": (17.8, 1.0)}
 
 
 def _end_designs() -> list[Design]:
@@ -584,8 +584,9 @@ def _end_designs() -> list[Design]:
     for where, (x_end, way) in TRACK_SPOTS.items():
 
         def truck_out(t: Array, u: Array, x_end: float = x_end, way: float = way) -> Cam:
-            # accelerating into a 1.2 m/s truck that is still running at the last frame
-            x = x_end - way * 1.2 * (t[-1] - t) ** 2 / (2.0 * t[-1]) - way * 0.6 * (t[-1] - t)
+            # accelerating (1.2 m/s^2) into a 1.6 m/s truck still running at the last frame
+            left = t[-1] - t
+            x = x_end - way * (1.6 * left - 0.6 * left * left)
             pos = np.stack([x, np.full_like(t, 0.8), np.full_like(t, 1.2)], axis=1)
             return Cam(pos, np.full_like(t, 90.0 - 90.0 * way), np.full_like(t, -4.0))
 
@@ -611,10 +612,10 @@ def _end_designs() -> list[Design]:
 
         def swing_in(t: Array, u: Array, x_end: float = x_end, way: float = way) -> Cam:
             # an arc that swings in towards the spot, still turning and moving at the end
-            a = np.radians(-60.0 + 60.0 * u)
+            a = np.radians(-90.0 + 90.0 * u)
             centre = np.array([x_end - way * 1.5, 0.0, 1.0])
             pos = np.stack([centre[0] + way * 1.5 * np.cos(a), centre[1] + 1.5 * np.sin(a),
-                            1.0 + 0.4 * u], axis=1)
+                            0.8 + 0.6 * u], axis=1)
             pan, tilt = _look(pos, (float(centre[0]), 0.0, 1.0))
             return Cam(pos, pan, tilt)
 
@@ -622,14 +623,15 @@ def _end_designs() -> list[Design]:
                         48.0, "Y", 0.01, kind="end"))
 
     def crane_end(t: Array, u: Array) -> Cam:  # rising and tilting, still going at the end
-        pos = _line(u, (13.5, 0.5, 0.6), (14.3, 0.5, 1.8))
+        x_end = TRACK_SPOTS["end"][0]
+        pos = _line(u, (x_end - 0.8, 0.5, 0.6), (x_end, 0.5, 1.8))
         return Cam(pos, np.full_like(u, -10.0), -5.0 - 30.0 * u)
 
     d.append(Design("crane ends moving, end (Z-up m, 25 fps)", crane_end, 1.6, 25.0,
                     kind="end"))
 
     def whip_start(t: Array, u: Array) -> Cam:  # starts in a whip and settles
-        pos = np.tile([-0.5, -0.5, 1.1], (t.size, 1))
+        pos = np.tile([TRACK_SPOTS["start"][0], -0.5, 1.1], (t.size, 1))
         return Cam(pos, 150.0 - 100.0 * (1.0 - (1.0 - u) ** 3), np.full_like(t, -6.0))
 
     d.append(Design("whip pan starts moving, start (Z-up m, 30 fps)", whip_start, 0.8, 30.0,
