@@ -246,8 +246,9 @@ def _ease(u: Array) -> Array:
 
 
 def _line(u: Array, a: tuple[float, float, float], b: tuple[float, float, float]) -> Array:
-    pa, pb = np.asarray(a), np.asarray(b)
-    return pa[None, :] + u[:, None] * (pb - pa)[None, :]
+    pa, pb = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    out: Array = pa[None, :] + u[:, None] * (pb - pa)[None, :]
+    return out
 
 
 def _hand(seed: int, t: Array, pos_m: float, ang_deg: float, f_hi: float = 4.0) -> tuple[
