@@ -72,7 +72,7 @@ def _fail_all(what: str, failures: list[str], total: int) -> None:
 
 
 def test_the_set_has_the_kinds_of_moves_the_issue_names(
-        shots: list[SetShot], end_shots: list[SetShot]) -> None:
+        robot: Robot, shots: list[SetShot], end_shots: list[SetShot]) -> None:
     authored = [s for s in shots if not s.sample]
     assert len(authored) >= 30
     stages = {s.name: read_shot(s.path) for s in shots if s.path is not None}
@@ -91,6 +91,7 @@ def test_the_set_has_the_kinds_of_moves_the_issue_names(
     assert len(end_shots) >= 12
     assert all(12 <= s.targets.shape[0] <= 48 for s in end_shots)
     for s in end_shots:
+        solve_path(robot, s.targets, objective="paper")  # reachable: raises otherwise
         step = np.linalg.norm(s.targets[[1, -1], :3, 3] - s.targets[[0, -2], :3, 3], axis=1)
         turn = [pose_error(s.targets[i], s.targets[j])[1] for i, j in ((1, 0), (-1, -2))]
         assert max(step.max() * s.fps, max(turn) * s.fps) > 0.1, s.name  # m/s or rad/s
