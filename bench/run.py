@@ -14,9 +14,12 @@ comes with a ratio against a baseline measured in the same run:
 3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage, and the
    ``camtraj convert`` command in a new process (start-up and imports included).
 4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
-5. Maximum feasible speed (the timing stage's ``max_speed``) per benchmark shot: ``shot`` vs
-   ``paper`` vs the retired ``smooth`` objective, solved by the tree at git revision
-   ``--smooth-rev`` (exported to a temporary folder and run in a subprocess).
+5. Maximum feasible speed (the timing stage's ``max_speed``) per shot of issue 13's shot set
+   (``tests/shot_set.py``): the default objective vs ``paper`` vs the default at 10x effort vs
+   the default of the tree at git revision ``--base-rev`` (exported to a temporary folder and
+   run in a subprocess), with how many run at real time. 5b: the default's frames/s on the
+   1440-frame path in a fresh call and warm, ``paper``'s, and the cost and memory per frame
+   for 240 to 23040 frames, this tree against ``--base-rev``, each in a new process.
 6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
    (``bench/bench_place.py``).
 7. What ``--report`` adds to the convert of the one-minute shot (``bench/bench_report.py``).
@@ -26,7 +29,7 @@ mix but only 2.4x at >= 256 candidates per call, and costs ~11 s of JIT compilat
 every farm task is a new process, and the whole-shot solver makes few large calls. So camtraj
 stays with numpy.
 
-Usage: ``python bench/run.py [--quick] [--json PATH] [--smooth-rev REV]``. The full run takes a
+Usage: ``python bench/run.py [--quick] [--json PATH] [--base-rev REV]``. The full run takes a
 few minutes on two cores; ``--quick`` uses a shorter shot, fewer poses and one repeat.
 """
 
@@ -69,7 +72,7 @@ from camtraj.usd_shot import read_shot  # noqa: E402
 
 TARGET_FPS = 5000.0  # issue 7's target for sequential IK, default objective [frames/s]
 TARGET_CONVERT_S = 1.5  # issue 7's target for converting a one-minute shot, end to end [s]
-SMOOTH_REV = "5ce7f5d"  # the last revision with the smooth objective (issue 7 retired it)
+BASE_REV = "dcd02a3"  # the solver issue 13's rewrite is measured against (main before it)
 NUMBA_NOTE = ("numpy kept over numba: numba's JIT costs ~11 s per process (every farm task is a "
               "new process) and gained only 2.4x at >= 256 candidates per call; the whole-shot "
               "solver makes few large numpy calls instead.")
@@ -605,10 +608,10 @@ def print_batch(res: dict[str, Any]) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Table 5: maximum feasible speed per shot, shot vs paper vs the retired smooth objective
+# Table 5: maximum feasible speed per shot of the set (issue 13): default vs paper vs 10x effort
 # ---------------------------------------------------------------------------------------------
 
-_OLD_SMOOTH = """
+_BASE_SOLVE = """
 import sys, numpy as np
 from camtraj.ik import solve_path_report
 from camtraj.robot import Robot
@@ -616,95 +619,254 @@ data = np.load(sys.argv[1])
 robot = Robot.default()
 out = {}
 for key in data.files:
-    if key.startswith("fps_"):
+    if not key.startswith("t_"):
         continue
     name = key[len("t_"):]
     fps = float(data["fps_" + name])
     try:
-        out[name] = solve_path_report(robot, data[key], objective="smooth",
-                                      frame_interval=1.0 / fps).q
+        out[name] = solve_path_report(robot, data[key], frame_interval=1.0 / fps).q
     except Exception as exc:  # report it as a missing value
         print(f"{name}: {type(exc).__name__}: {exc}", file=sys.stderr)
 np.savez(sys.argv[2], **out)
 """
 
 
-def old_smooth_paths(shots: list[Any], rev: str, work: Path) -> tuple[dict[str, Any], str]:
-    """Solve the shots with the smooth objective of the tree at git revision ``rev``."""
+def export_revision(rev: str, work: Path) -> tuple[Path | None, str]:
+    """The tree at git revision ``rev`` in ``work`` (once), or None and why not."""
     tree = work / f"camtraj-{rev}"
+    if tree.is_dir():
+        return tree, ""
     tree.mkdir()
     try:
         archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True,
                                  check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
     except (OSError, subprocess.CalledProcessError) as exc:
-        return {}, f"cannot export revision {rev}: {exc}"
-    np.savez(work / "set.npz", **{f"t_{s.name}": s.targets for s in shots},
-             **{f"fps_{s.name}": np.array(s.fps) for s in shots})
+        return None, f"cannot export revision {rev}: {exc}"
+    return tree, ""
+
+
+def base_paths(shots: list[Any], rev: str, work: Path) -> tuple[dict[str, Any], str]:
+    """Solve the shots with the default objective of the tree at git revision ``rev``."""
+    tree, why = export_revision(rev, work)
+    if tree is None:
+        return {}, why
+    keys = {s.name: f"s{i}" for i, s in enumerate(shots)}  # npz keys: no odd characters
+    np.savez(work / "set.npz", **{f"t_{keys[s.name]}": s.targets for s in shots},
+             **{f"fps_{keys[s.name]}": np.array(s.fps) for s in shots})
     env = dict(os.environ, PYTHONPATH=str(tree))
-    proc = subprocess.run([sys.executable, "-c", _OLD_SMOOTH, str(work / "set.npz"),
-                           str(work / "smooth.npz")], env=env, capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-c", _BASE_SOLVE, str(work / "set.npz"),
+                           str(work / "base.npz")], env=env, capture_output=True, text=True,
                           check=False, cwd=str(work))
     if proc.returncode != 0:
         return {}, f"revision {rev} failed: {proc.stderr.strip()[-300:]}"
-    data = np.load(work / "smooth.npz")
-    return {k: data[k] for k in data.files}, proc.stderr.strip()
+    data = np.load(work / "base.npz")
+    return {name: data[k] for name, k in keys.items() if k in data.files}, proc.stderr.strip()
 
 
-def bench_speeds(robot: Robot, rev: str, work: Path) -> dict[str, Any]:
-    from camtraj.timing import Limits, TimingLimitError, time_shot
-
+def bench_speeds(robot: Robot, rev: str, work: Path, quick: bool) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
-    from tests.shot_set import shot_set
-
-    def speed(q: np.ndarray | None, fps: float) -> float:
-        if q is None:
-            return math.nan
-        try:
-            return float(time_shot(q, np.arange(q.shape[0]) / fps, Limits.from_robot(robot),
-                                   mode="scale").report.max_speed)
-        except TimingLimitError as exc:  # a position overshoot: the speed it would allow
-            return float(exc.max_speed)
+    from tests.shot_set import EFFORT, acceptance_set, max_speed, motion_end_set, speeds
 
     folder = work / "set"
     folder.mkdir()
-    shots = shot_set(robot, folder)
-    log(f"table 5: old smooth objective from revision {rev} in a subprocess")
-    smooth, note = old_smooth_paths(shots, rev, work)
+    shots = acceptance_set(robot, folder, quick=quick)
+    ends = motion_end_set(robot, folder)
+    if quick:  # a subset: every third move, every third end-in-motion move
+        shots, ends = shots[::3], ends[::3]
+    log(f"table 5: the default objective of revision {rev} in a subprocess")
+    base, note = base_paths(shots + ends, rev, work)
     rows = []
-    for s in shots:
+    for which, s in [("set", s) for s in shots] + [("end", s) for s in ends]:
         log(f"table 5: {s.name}")
-        dt = 1.0 / s.fps
-        q_shot = ik.solve_path(robot, s.targets, frame_interval=dt)
-        q_paper = ik.solve_path(robot, s.targets, objective="paper")
-        rows.append({"shot": s.name, "frames": int(s.targets.shape[0]), "fps": s.fps,
-                     "shot_speed": speed(q_shot, s.fps), "paper_speed": speed(q_paper, s.fps),
-                     "smooth_speed": speed(smooth.get(s.name), s.fps)})
-    return {"rows": rows, "smooth_rev": rev, "smooth_note": note}
+        sp = speeds(robot, s, EFFORT)
+        q_base = base.get(s.name)
+        rows.append({"shot": s.name, "set": which,
+                     "frames": int(s.targets.shape[0]), "fps": s.fps,
+                     "default": sp.default, "paper": sp.paper, "effort": sp.effort,
+                     "base": max_speed(robot, q_base, s.fps) if q_base is not None else math.nan})
+    return {"rows": rows, "base_rev": rev, "base_note": note, "effort": EFFORT, "quick": quick}
+
+
+def _speed_summary(rows: list[dict[str, Any]], effort: float, rev: str) -> list[str]:
+    def real(key: str) -> str:
+        ok = [r for r in rows if math.isfinite(r[key])]
+        return f"{sum(r[key] >= 1.0 for r in ok)}/{len(ok)}"
+
+    def med(key: str) -> str:
+        xs = [ratio(r["default"], r[key]) for r in rows if r[key] > 0 and math.isfinite(r[key])]
+        return f"x{fmt(statistics.median(xs))} (smallest x{fmt(min(xs))})" if xs else "-"
+
+    return [f"at real time: default {real('default')}, paper {real('paper')}, {effort:g}x effort "
+            f"{real('effort')}, default of {rev} {real('base')}",
+            f"median default / paper {med('paper')}; default / {effort:g}x effort {med('effort')}; "
+            f"default / default of {rev} {med('base')}"]
 
 
 def print_speeds(res: dict[str, Any]) -> None:
+    k, rev = res["effort"], res["base_rev"]
     rows = []
     for r in res["rows"]:
-        rows.append([r["shot"], str(r["frames"]), fmt(r["shot_speed"]), fmt(r["paper_speed"]),
-                     fmt(r["smooth_speed"]), fmt(ratio(r["shot_speed"], r["paper_speed"])),
-                     fmt(ratio(r["shot_speed"], r["smooth_speed"]))])
-    shot_paper = [ratio(r["shot_speed"], r["paper_speed"]) for r in res["rows"]]
-    shot_smooth = [ratio(r["shot_speed"], r["smooth_speed"]) for r in res["rows"]
-                   if math.isfinite(r["smooth_speed"])]
+        rows.append([r["shot"], str(r["frames"]), fmt(r["fps"], 5), fmt(r["default"]),
+                     fmt(r["paper"]), fmt(r["effort"]), fmt(r["base"]),
+                     "yes" if r["default"] >= 1.0 else "no",
+                     fmt(ratio(r["default"], r["paper"])), fmt(ratio(r["default"], r["effort"]))])
+    main_rows = [r for r in res["rows"] if r["set"] == "set"]
+    end_rows = [r for r in res["rows"] if r["set"] == "end"]
     table(
         "5. Maximum feasible speed per shot (timing stage max_speed, fraction of real time): "
-        "default shot vs paper vs the retired smooth",
-        ["shot", "frames", "shot (default)", "paper", f"old smooth ({res['smooth_rev']})",
-         "shot / paper", "shot / old smooth"],
+        f"default vs paper vs the default at {k:g}x effort vs the default of {rev}"
+        + (" (--quick: a subset)" if res["quick"] else ""),
+        ["shot", "frames", "fps", "default", "paper", f"{k:g}x effort", f"default {rev}",
+         "real time", "default / paper", f"default / {k:g}x"],
         rows,
-        [f"median shot / paper x{fmt(statistics.median(shot_paper))}, smallest "
-         f"x{fmt(min(shot_paper))}; median shot / old smooth "
-         f"x{fmt(statistics.median(shot_smooth)) if shot_smooth else '-'}",
+        [f"shot set ({len(main_rows)}): " + "; ".join(_speed_summary(main_rows, k, rev)),
+         f"end-in-motion moves ({len(end_rows)}): "
+         + "; ".join(_speed_summary(end_rows, k, rev)),
+         f"{k:g}x effort: tests/shot_set.py with_effort (refine rounds, track and extend "
+         "samples); the default of the base revision is solved there in a subprocess and timed "
+         "by this tree's timing stage",
          "a path whose spline leaves a position limit between frames is given the speed its "
          "velocities, accelerations and jerks allow (the timing stage's number with the error); "
-         "'-': no speed at all (its run-up or run-out leaves a position limit)",
-         *([f"old smooth: {res['smooth_note'][:200]}"] if res.get("smooth_note") else [])],
+         "0: no speed at all (its run-up or run-out leaves a position limit)",
+         *([f"base revision: {res['base_note'][:200]}"] if res.get("base_note") else [])],
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 5b: solver performance against the base revision (issue 13's figures)
+# ---------------------------------------------------------------------------------------------
+
+_PERF = """
+import json, sys, time, tracemalloc, statistics
+import numpy as np
+t_import = time.perf_counter()
+from camtraj.ik import solve_path
+from camtraj.robot import Robot
+t_import = time.perf_counter() - t_import
+data = np.load(sys.argv[1])
+repeats = int(sys.argv[3])
+robot = Robot.default()
+dt = 1.0 / 24.0
+path = data["n1440"]
+out = {"import_s": t_import}
+t0 = time.perf_counter()
+solve_path(robot, path, frame_interval=dt)
+out["fresh_s"] = time.perf_counter() - t0
+walls = []
+for _ in range(repeats):
+    t0 = time.perf_counter()
+    solve_path(robot, path, frame_interval=dt)
+    walls.append(time.perf_counter() - t0)
+out["warm_s"] = statistics.median(walls)
+t0 = time.perf_counter()
+solve_path(robot, path, objective="paper", frame_interval=dt)
+out["paper_s"] = time.perf_counter() - t0
+sizes = {}
+for key in sorted(data.files, key=lambda k: int(k[1:])):
+    targets = data[key]
+    runs = []
+    for _ in range(max(1, min(repeats, 2880 // targets.shape[0]))):
+        t0 = time.perf_counter()
+        solve_path(robot, targets, frame_interval=dt)
+        runs.append(time.perf_counter() - t0)
+    wall = statistics.median(runs)
+    tracemalloc.start()
+    solve_path(robot, targets, frame_interval=dt)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    sizes[key[1:]] = {"wall_s": wall, "peak_bytes": peak}
+out["sizes"] = sizes
+json.dump(out, open(sys.argv[2], "w"))
+"""
+
+
+def long_targets(robot: Robot, n: int) -> np.ndarray:
+    """Flange targets of make_samples' long move over ``n`` frames (no USD round trip)."""
+    ms = load_make_samples()
+    move = ms.long_move(n)
+    cams = np.tile(np.eye(4), (n, 1, 1))
+    for i in range(n):
+        cams[i, :3, :3] = ms.cam2world_rotation(float(move.pan[i]), float(move.tilt[i]))
+    cams[:, :3, 3] = move.positions
+    out: np.ndarray = cams @ np.linalg.inv(robot.camera2flange)
+    return out
+
+
+def bench_perf(robot: Robot, targets_1440: np.ndarray, rev: str, work: Path,
+               quick: bool) -> dict[str, Any]:
+    """The default on the 1440-frame path fresh and warm, paper, cost per frame by length:
+    this tree and the tree at ``rev``, each in its own new process."""
+    sizes = (240, 1440) if quick else (240, 1440, 5760, 23040)
+    arrays = {f"n{n}": targets_1440 if n == 1440 else long_targets(robot, n) for n in sizes}
+    np.savez(work / "perf.npz", **arrays)
+    out: dict[str, Any] = {"rev": rev, "sizes": list(sizes)}
+    base_tree, why = export_revision(rev, work)
+    runs: dict[str, list[dict[str, Any]]] = {"this tree": [], rev: []}
+    for r in range(1 if quick else 2):  # alternate the trees: both see the same load
+        for label, tree in (("this tree", ROOT), (rev, base_tree)):
+            if tree is None:
+                out[label] = {"error": why}
+                continue
+            log(f"table 5b: solver performance of {label} in a new process, run {r + 1}")
+            env = dict(os.environ, PYTHONPATH=str(tree))
+            result = work / "perf.json"
+            proc = subprocess.run([sys.executable, "-c", _PERF, str(work / "perf.npz"),
+                                   str(result), "1" if quick else "3"], env=env,
+                                  capture_output=True, text=True, check=False, cwd=str(work))
+            if proc.returncode != 0:
+                out[label] = {"error": proc.stderr.strip()[-300:]}
+                continue
+            runs[label].append(json.loads(result.read_text()))
+    for label, results in runs.items():
+        if results and label not in out:  # the fastest of the runs: least disturbed by load
+            best = {k: min(r[k] for r in results) for k in ("import_s", "fresh_s", "warm_s",
+                                                            "paper_s")}
+            best["sizes"] = {n: {"wall_s": min(r["sizes"][n]["wall_s"] for r in results),
+                                 "peak_bytes": results[0]["sizes"][n]["peak_bytes"]}
+                             for n in results[0]["sizes"]}
+            out[label] = best
+    return out
+
+
+def print_perf(res: dict[str, Any]) -> None:
+    rev = res["rev"]
+    now, base = res["this tree"], res[rev]
+    if "error" in now:
+        print(f"\n5b. Solver performance: failed: {now['error']}")
+        return
+    have_base = "error" not in base
+
+    def cell(r: dict[str, Any], key: str, n: int = 1440) -> float:
+        return n / r[key] if key in r else math.nan
+
+    rows = []
+    for label, key in (("default, fresh call (first in a new process) [frames/s]", "fresh_s"),
+                       ("default, warm [frames/s]", "warm_s"),
+                       ("paper [frames/s]", "paper_s")):
+        a = cell(now, key)
+        b = cell(base, key) if have_base else math.nan
+        rows.append([label, f"{a:,.0f}", f"{b:,.0f}" if math.isfinite(b) else "-",
+                     fmt(ratio(a, b))])
+    for n in res["sizes"]:
+        a = now["sizes"][str(n)]
+        b = base["sizes"].get(str(n)) if have_base else None
+        us_a, us_b = 1e6 * a["wall_s"] / n, 1e6 * b["wall_s"] / n if b else math.nan
+        kb_a, kb_b = a["peak_bytes"] / n / 1e3, b["peak_bytes"] / n / 1e3 if b else math.nan
+        rows.append([f"default, {n} frames: cost per frame [us]", fmt(us_a), fmt(us_b),
+                     fmt(ratio(us_a, us_b))])
+        rows.append([f"default, {n} frames: peak memory per frame [KB]", fmt(kb_a), fmt(kb_b),
+                     fmt(ratio(kb_a, kb_b))])
+    table(
+        f"5b. Solver performance on the 1-minute path (1440 frames, 24 fps) and by length, this "
+        f"tree vs revision {rev}, each in a new process",
+        ["figure", "this tree", rev, f"this / {rev}"], rows,
+        ["fresh: the first solve_path call after import (lazy imports and caches included); "
+         "warm: median of the next calls; cost per frame (median of up to 3 calls) and memory "
+         "(tracemalloc peak, a separate call) on make_samples' long move spread over n frames; "
+         "the trees run alternately (twice each, the faster run kept; once with --quick)",
+         "the machine is shared: read the ratios (same run), not the absolute figures",
+         *([f"revision {rev}: {base['error'][:200]}"] if not have_base else [])],
     )
 
 
@@ -759,8 +921,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="shorter shot, fewer poses, one repeat (about a minute)")
     parser.add_argument("--json", type=Path, default=HERE / "results.json",
                         help="where to write the numbers (default: bench/results.json)")
-    parser.add_argument("--smooth-rev", default=SMOOTH_REV,
-                        help="git revision whose smooth objective fills table 5's old column")
+    parser.add_argument("--base-rev", default=BASE_REV,
+                        help="git revision whose default objective tables 5 and 5b compare "
+                             f"against (default {BASE_REV})")
     args = parser.parse_args(argv)
     quick: bool = args.quick
     t_start = time.perf_counter()
@@ -801,9 +964,13 @@ def main(argv: list[str] | None = None) -> int:
         bare_ik = seq["shot"]["median_wall_s"] * targets.shape[0] / seq_targets.shape[0]
         print_convert(conv, targets.shape[0] / FPS, bare_ik)
 
-        speeds = bench_speeds(robot, args.smooth_rev, work)
+        speeds = bench_speeds(robot, args.base_rev, work, quick)
         results["speeds"] = speeds
         print_speeds(speeds)
+
+        perf = bench_perf(robot, targets, args.base_rev, work, quick)
+        results["solver_performance"] = perf
+        print_perf(perf)
 
         from bench_report import bench_report, print_report
 

@@ -78,9 +78,12 @@ def _rz(deg: float) -> Array:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def cam2world_rotation(pan: float, tilt: float) -> Array:
-    """(3, 3) Z-up world rotation of a USD camera (looks down -Z, +Y up) at pan/tilt [deg]."""
-    return _rz(pan - 90.0) @ _rx(90.0 + tilt)
+def cam2world_rotation(pan: float, tilt: float, roll: float = 0.0) -> Array:
+    """(3, 3) Z-up world rotation of a USD camera (looks down -Z, +Y up) at pan/tilt [deg],
+    turned by ``roll`` [deg] about its view axis (a dutch angle; positive turns the camera's
+    up vector to its left)."""
+    rot = _rz(pan - 90.0) @ _rx(90.0 + tilt)
+    return rot @ _rz(roll) if roll else rot
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,8 @@ class Move:
         positions: (n, 3) camera positions in [m], Z-up.
         pan: (n,) heading in [deg]; tilt: (n,) elevation in [deg].
         focal_mm, focus_m, f_stop: (n,) lens channels, or one float when constant.
+        roll: (n,) turn about the view axis in [deg] (see :func:`cam2world_rotation`), or 0;
+            only the matrix writer (:func:`_camera_prim_matrix`) writes it.
     """
 
     frames: Array
@@ -101,6 +106,7 @@ class Move:
     focal_mm: Array | float
     focus_m: Array | float
     f_stop: Array | float
+    roll: Array | float = 0.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -138,8 +144,12 @@ def _channel(
 
 
 def _header(
-    doc: str, up_axis: str, meters_per_unit: float, frames: Array, fps: float, default_prim: str
+    doc: str, up_axis: str, meters_per_unit: float, frames: Array, fps: float, default_prim: str,
+    time_codes_per_second: float | None = None,
 ) -> str:
+    """The stage's metadata; ``frames`` are time codes, ``time_codes_per_second`` defaults to
+    ``fps`` (one time code per film frame)."""
+    tcps = fps if time_codes_per_second is None else time_codes_per_second
     lines = [
         "#usda 1.0",
         "(",
@@ -149,7 +159,7 @@ def _header(
         f"    framesPerSecond = {_num(fps)}",
         f"    metersPerUnit = {_num(meters_per_unit)}",
         f"    startTimeCode = {int(frames[0])}",
-        f"    timeCodesPerSecond = {_num(fps)}",
+        f"    timeCodesPerSecond = {_num(tcps)}",
         f'    upAxis = "{up_axis}"',
         ")",
         "",
@@ -198,6 +208,9 @@ def _camera_prim_trs(
     name: str, move: Move, up_axis: str, meters_per_unit: float, indent: str
 ) -> str:
     """A Camera prim with time-sampled ``translate`` and ``rotateXYZ`` ops (Maya style)."""
+    if np.any(np.asarray(move.roll) != 0.0):
+        msg = "the translate/rotateXYZ writer has no roll: write the move as a matrix"
+        raise ValueError(msg)
     inner = indent + "    "
     pts = _stage_points(move.positions, up_axis, meters_per_unit)
     static = bool(np.all(pts == pts[0]))
@@ -219,14 +232,19 @@ def _camera_prim_trs(
     return "\n".join(lines)
 
 
-def _camera_prim_matrix(name: str, move: Move, meters_per_unit: float, indent: str) -> str:
-    """A Camera prim with a time-sampled 4x4 ``xformOp:transform`` (Blender style, Z-up)."""
+def _camera_prim_matrix(
+    name: str, move: Move, meters_per_unit: float, indent: str, up_axis: str = "Z"
+) -> str:
+    """A Camera prim with a time-sampled 4x4 ``xformOp:transform`` (Blender style; Z-up, or
+    Y-up with ``up_axis="Y"``)."""
     inner = indent + "    "
-    pts = _stage_points(move.positions, "Z", meters_per_unit)
+    pts = _stage_points(move.positions, up_axis, meters_per_unit)
+    to_stage = _ZUP2YUP if up_axis == "Y" else np.eye(3)
+    roll = np.broadcast_to(np.asarray(move.roll, dtype=np.float64), np.shape(move.pan))
     mats = []
-    for p, pan, tilt in zip(pts, move.pan, move.tilt, strict=True):
+    for p, pan, tilt, r in zip(pts, move.pan, move.tilt, roll, strict=True):
         m = np.eye(4)
-        m[:3, :3] = cam2world_rotation(float(pan), float(tilt))
+        m[:3, :3] = to_stage @ cam2world_rotation(float(pan), float(tilt), float(r))
         m[:3, 3] = p
         mats.append(_matrix(m.T))  # USD stores row-vector matrices: translation in the last row
     lines = [
