@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +26,7 @@ from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
 from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost
+from camtraj.ik.spline_ops import BandOp
 from camtraj.robot import Robot
 
 Array = NDArray[np.float64]
@@ -65,10 +67,10 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
            take_speed: Callable[[Array], float] | None = None) -> Refined:
     """Lower the take's peak use from the start curves x0 (n, 2), measures y0 (n, 10).
 
-    A continuation over the power of :meth:`ShotCost.peak_norm` (6, 12, 24, 48): each stage
-    starts from the last one's answer with the scale set to its peak use, and runs damped
-    Gauss-Newton steps until a step lowers the stage's objective by less than ``tolerance``
-    (relative), or after ``rounds`` steps.
+    A continuation over the power of :meth:`ShotCost.refine_total`'s peak norm (6, 12, 24,
+    48): each stage starts from the last one's answer with the scale set to its peak use,
+    and runs damped Gauss-Newton steps until three steps in a row lower the stage's objective
+    by less than ``tolerance`` (relative), no step lowers it, or after ``rounds`` steps.
 
     Args:
         robot: The robot.
@@ -174,8 +176,9 @@ def _jacobian(robot: Robot, targets3: Array, b3: IntArray, x: Array, y: Array) -
     return grad_y
 
 
-def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Array], Array]:
-    """Gauss-Newton normal matrix (as 2 x 2 blocks on block diagonals 0..3) and gradient of
+def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[Array, Array]:
+    """Gauss-Newton normal matrix (n, D, 2, 2) (the 2 x 2 block of frame k with frame k + d)
+    and gradient of
     ``cost.refine_total``.
 
     The difference terms are first gathered per axis in the joints: ``M[d][p, i]`` is the
@@ -189,12 +192,13 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
     n = y.shape[0]
     q, G = y[:, :8], grad_y[:, :8, :]
     p, s = cost.power, cost.scale
-    usages = cost.usages(q)
+    use = cost.take_use(q)
+    usages = use.usages
     width = max(op.coef.shape[1] for op, _ in usages)
     pad = width  # frames of padding on either side of the gathered arrays
     M = np.zeros((width, n + 2 * pad, 8))  # M[d, pad + f]: curvature coupling f and f + d
     gq = np.zeros((n + 2 * pad, 8))
-    phi = cost.peak_sum(q)
+    phi = use.power_sum(p, s)
     kappa = (s / p) * max(phi, 1e-300) ** (1.0 / p - 1.0)
     lims = (cost.vel, cost.acc, cost.jerk)
     for op, z in usages:
@@ -204,9 +208,9 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
         lim = lims[op.order - 1]
         dz = kappa * ex * a ** (ex - 1.0) * np.sign(z) / (c * lim)
         w = kappa * ex * (ex - 1.0) * a ** (ex - 2.0) / (c * c * lim * lim)
-        _gather(op.coef, op.offset, dz, w, gq, M, pad)
-    if n >= 3:  # the ends' stopping needs: one row per end and axis
-        need, d1, d2, rows = cost.edge_needs(q)
+        _gather(op, dz, w, gq, M, pad)
+    if use.ends is not None:  # the ends' stopping needs: one row per end and axis
+        need, d1, d2, rows = use.ends
         a = need / s
         f1 = kappa * p * a ** (p - 1.0) / s
         f2 = kappa * p * (p - 1.0) * a ** (p - 2.0) / (s * s)
@@ -218,23 +222,19 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
             lo = pad + row + off
             gq[lo:lo + lin.shape[0]] += lin * f1[end]
             for o1 in range(lin.shape[0]):
-                for o2 in range(o1, lin.shape[0]):
-                    M[o2 - o1, lo + o1] += lin[o1] * lin[o2] * f2[end]
+                M[: lin.shape[0] - o1, lo + o1] += lin[o1:] * (lin[o1] * f2[end])
     m = n - 1  # the motion tie-break, mean over steps, through its majorising quadratic
     if m > 0:
         z = np.diff(q, axis=0) / cost.vel
         t = cost.tie_break / m
         dz = t * cost.motion_coef * np.sign(z) / cost.vel
         w = t * cost.motion_coef / np.maximum(np.abs(z), 0.05) / (cost.vel * cost.vel)
-        _gather(np.tile([-1.0, 1.0], (m, 1)), 0, dz, w, gq, M, pad)
+        _gather(BandOp(1, np.tile([-1.0, 1.0], (m, 1)), 0, (0, m)), dz, w, gq, M, pad)
     g = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
-    H = []
-    for d in range(width):
-        blk = np.zeros((n, 2, 2))
-        if n - d > 0:
-            Ga = M[d, pad:pad + n - d, :, None] * G[: n - d]
-            blk[: n - d] = np.einsum("kip,kiq->kpq", Ga, G[d:])
-        H.append(blk)
+    # H[k, d] = sum_i M[d, k, i] G[k, i]^T G[k + d, i]: frame k with frame k + d
+    g_pad = np.concatenate([G, np.zeros((width, 8, 2))])
+    g_win = np.lib.stride_tricks.sliding_window_view(g_pad, width, axis=0)[:n]  # (n,8,2,D)
+    H = np.einsum("dki,kip,kiqd->kdpq", M[:, pad:pad + n], G, g_win, optimize=True)
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
     # singularity distance itself), mean over frames
     e = cost.intrusion(y)
@@ -248,8 +248,8 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
         gz = np.where(active, 2 * (lam * e + cost.close_weight * close) * dz, 0.0)
         hz = np.where(active, 2 * (lam + cost.close_weight * (close > 0)) * dz * dz, 0.0)
         g += np.einsum("ki,kip->kp", gz, grad_y)
-        H[0] += np.einsum("ki,kip,kiq->kpq", hz, grad_y, grad_y)
-    slow = max(1.0, cost.peak(q))
+        H[:, 0] += np.einsum("ki,kip,kiq->kpq", hz, grad_y, grad_y)
+    slow = max(1.0, use.peak())
     for edge, inner in ((0, 1), (n - 1, n - 2)):  # run-up / run-out room
         pe, slope = cost.edge_excursion(q[edge], q[inner], slow)
         e = cost.edge_intrusion(pe)
@@ -264,86 +264,95 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[list[Arr
         a_i = (1.0 - slope)[:, None] * G[inner]
         g[edge] += ge @ a_e
         g[inner] += ge @ a_i
-        H[0][edge] += (he[:, None, None] * a_e[:, :, None] * a_e[:, None, :]).sum(axis=0)
-        H[0][inner] += (he[:, None, None] * a_i[:, :, None] * a_i[:, None, :]).sum(axis=0)
+        H[edge, 0] += (he[:, None, None] * a_e[:, :, None] * a_e[:, None, :]).sum(axis=0)
+        H[inner, 0] += (he[:, None, None] * a_i[:, :, None] * a_i[:, None, :]).sum(axis=0)
         lo_f = min(edge, inner)
         a_lo, a_hi = (a_e, a_i) if edge < inner else (a_i, a_e)
-        H[1][lo_f] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
+        H[lo_f, 1] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
     return H, g
 
 
-def _gather(coef: Array, offset: int, dz: Array, w: Array, gq: Array, M: Array,
-            pad: int) -> None:
+def _gather(op: BandOp, dz: Array, w: Array, gq: Array, M: Array, pad: int) -> None:
     """Add one operator's terms to the joint-space gradient ``gq`` and curvature ``M``.
 
     Row r of the operator reads frames r + offset + o with weights coef[r, o]; its gradient
-    in its value is dz[r] (rows, 8), its Gauss-Newton curvature w[r].
+    in its value is dz[r] (rows, 8), its Gauss-Newton curvature w[r]: frame f gets
+    sum coef[r, f - r - offset] dz[r], and the pair (f, f + d) sum coef[r, o] coef[r, o + d]
+    w[r]. The shift-invariant rows are correlations, one matrix product each; the rows near
+    the ends are added weight by weight.
     """
+    coef = op.coef
     rows, width = coef.shape
-    base = pad + offset
-    for o1 in range(width):
-        c1 = coef[:, o1, None]
-        gq[base + o1:base + o1 + rows] += c1 * dz
-        cw = c1 * w
-        for o2 in range(o1, width):
-            M[o2 - o1, base + o1:base + o1 + rows] += coef[:, o2, None] * cw
+    base = pad + op.offset
+    a, b = op.inner
+    if b > a:
+        kernel = coef[a]
+        rev = kernel[::-1]
+        # pairs: K[j, d] = k[o] k[o + d] with o = width - 1 - j
+        pairs = np.zeros((width, width))
+        for d in range(width):
+            pairs[d:, d] = rev[d:] * rev[:width - d]
+        size = b - a + width - 1
+        for src, dst, weights in ((dz, gq, rev[:, None]), (w, M, pairs)):
+            padded = np.zeros((size + width - 1, 8))
+            padded[width - 1:width - 1 + b - a] = src[a:b]
+            win = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)[:size]
+            out = win @ weights  # (size, 8, 1 or D): frame base + a + u
+            if dst is gq:
+                gq[base + a:base + a + size] += out[..., 0]
+            else:
+                M[:width, base + a:base + a + size] += out.transpose(2, 0, 1)
+    for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
+        if hi <= lo:
+            continue
+        c, zd, ww = coef[lo:hi], dz[lo:hi], w[lo:hi]
+        for o1 in range(width):
+            c1 = c[:, o1, None]
+            at = base + lo + o1
+            gq[at:at + hi - lo] += c1 * zd
+            # couplings of o1 with o2 = o1 .. width - 1, all distances d = o2 - o1 at once
+            M[: width - o1, at:at + hi - lo] += c[:, o1:].T[:, :, None] * (c1 * ww)[None]
 
 
-def _solve_banded(H: list[Array], g: Array, mu: float) -> Array:
+def _solve_banded(H: Array, g: Array, mu: float) -> Array:
     """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step.
 
-    ``H[d][i]`` is the 2x2 block coupling frame i with frame i + d (the d = 0 blocks are
-    symmetric). Grouping as many frames as the band is wide makes the matrix block
-    tridiagonal, solved by block elimination (the symmetric positive
-    definite block Thomas algorithm): a few small numpy calls per group, and no scipy import
-    on the first solve of a process (which costs more than every later solve together).
+    ``H[k, d]`` is the 2x2 block coupling frame k with frame k + d (the d = 0 blocks are
+    symmetric): a symmetric positive definite band of 2 D - 1 scalars above the diagonal,
+    solved by LAPACK's banded Cholesky (scipy's ``solveh_banded``).
     """
-    n = g.shape[0]
-    group = max(len(H) - 1, 1)
-    groups = -(-n // group)
-    m = groups * group  # frames, padded with unit rows (step 0) to whole groups
-    diag_blocks = np.zeros((groups, 2 * group, 2 * group))
-    upper_blocks = np.zeros((groups, 2 * group, 2 * group))
-    for d, blk in enumerate(H):
-        i = np.arange(n - d)
-        j = i + d
-        gi, gj = i // group, j // group
-        ri, cj = 2 * (i % group), 2 * (j % group)
-        for r in range(2):
-            for s in range(2):
-                vals = blk[: n - d, r, s]
-                same = gi == gj
-                np.add.at(diag_blocks, (gi[same], ri[same] + r, cj[same] + s), vals[same])
-                if d > 0:  # the lower triangle of a diagonal block, by symmetry
-                    np.add.at(diag_blocks, (gi[same], cj[same] + s, ri[same] + r), vals[same])
-                    nxt = ~same
-                    np.add.at(upper_blocks, (gi[nxt], ri[nxt] + r, cj[nxt] + s), vals[nxt])
-    size = 2 * group
-    eye = np.arange(size)
-    diag = diag_blocks[:, eye, eye].reshape(-1)[: 2 * n]
-    shift = 1e-9 * max(float(diag.max()), 1e-12) + 1e-12
-    damped = diag_blocks[:, eye, eye] * (1.0 + mu) + shift
-    pad = np.arange(2 * n, 2 * m)
-    damped.reshape(-1)[pad] = 1.0  # padding unknowns: 1 * step = 0
-    diag_blocks[:, eye, eye] = damped
-    rhs = np.zeros(2 * m)
-    rhs[: 2 * n] = -g.ravel()
-    b = rhs.reshape(groups, size)
-    w = np.zeros_like(upper_blocks)  # C_k^-1 U_k
-    z = np.zeros_like(b)  # C_k^-1 y_k
-    c_k, y_k = diag_blocks[0], b[0]
-    for k in range(groups):
-        if k > 0:
-            u_t = upper_blocks[k - 1].T
-            c_k = diag_blocks[k] - u_t @ w[k - 1]
-            y_k = b[k] - u_t @ z[k - 1]
-        sol = np.linalg.solve(c_k, np.column_stack([upper_blocks[k], y_k]))
-        w[k], z[k] = sol[:, :size], sol[:, size]
-    x = np.empty_like(b)
-    x[-1] = z[-1]
-    for k in range(groups - 2, -1, -1):
-        x[k] = z[k] - w[k] @ x[k + 1]
-    return x.reshape(-1)[: 2 * n].reshape(n, 2)
+    from scipy.linalg import solveh_banded
+
+    n, width = H.shape[:2]
+    u = 2 * width - 1
+    ab = np.zeros((u + 1, 2 * n))
+    dest, src = _band_index(n, width)
+    ab.reshape(-1)[dest] = H.reshape(-1)[src]
+    diag = ab[u]
+    top = max(float(diag.max()), 1e-12)
+    # Entries far below the diagonal shift cannot change the step; dropping them keeps the
+    # factorisation clear of subnormal numbers, which slow LAPACK a thousandfold.
+    ab[np.abs(ab) < 1e-24 * top] = 0.0
+    shift = 1e-9 * top + 1e-12
+    ab[u] = diag * (1.0 + mu) + shift
+    rhs = -g.reshape(-1)
+    rhs[np.abs(rhs) < 1e-300] = 0.0
+    return np.asarray(solveh_banded(ab, rhs, check_finite=False)).reshape(n, 2)
+
+
+@lru_cache(maxsize=16)
+def _band_index(n: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Where each stored scalar of H (n, width, 2, 2) goes in the upper band form of
+    ``solveh_banded`` (flat indices into ab (2 width, 2 n) and into H), for the scalars
+    on or above the diagonal that exist (frame k + d < n)."""
+    k, d, p, q = np.meshgrid(np.arange(n), np.arange(width), np.arange(2), np.arange(2),
+                             indexing="ij")
+    row, col = 2 * k + p, 2 * (k + d) + q
+    keep = ((k + d) < n) & (row <= col)
+    u = 2 * width - 1
+    dest = (u + row - col) * (2 * n) + col
+    src = np.arange(k.size).reshape(k.shape)
+    return dest[keep], src[keep]
 
 
 __all__ = ["Refined", "refine"]

@@ -44,6 +44,36 @@ CLOSE = 0.8
 
 
 @dataclass(frozen=True)
+class TakeUse:
+    """A path's use of the limits: the spline's velocity, acceleration and jerk usages
+    (:mod:`camtraj.ik.spline_ops`) at every knot and piece middle over the limits per frame
+    interval, one (operator, (rows, 8)) pair per operator, and the ends' stopping needs
+    (:meth:`ShotCost.edge_needs`: need, d need / d z1, d need / d z2, and the operator rows
+    (2 ends, velocity / acceleration, width) they are read with), None below 3 frames."""
+
+    usages: list[tuple[BandOp, Array]]
+    ends: tuple[Array, Array, Array, Array] | None
+
+    def peak(self) -> float:
+        """max(|v|, |a|^(1/2), |j|^(1/3), end needs): the take runs at most at 1/peak."""
+        out = max(float(np.abs(z).max()) ** (1.0 / op.order) for op, z in self.usages)
+        out = float(out)
+        if self.ends is not None:
+            out = max(out, float(self.ends[0].max()))
+        return out
+
+    def power_sum(self, power: float, scale: float) -> float:
+        """sum (u / scale)^power over every use u (u = |v|, |a|^(1/2), |j|^(1/3), needs)."""
+        phi = 0.0
+        for op, z in self.usages:
+            k = op.order
+            phi += float(((np.abs(z) / scale ** k) ** (power / k)).sum())
+        if self.ends is not None:
+            phi += float(((self.ends[0] / scale) ** power).sum())
+        return phi
+
+
+@dataclass(frozen=True)
 class ShotCost:
     """The objective of :mod:`camtraj.ik.shot_cost` for one robot and frame interval.
 
@@ -95,84 +125,63 @@ class ShotCost:
         )
 
     # -- the take's peak use (what the refinement minimises) -------------------------------
-    def usages(self, q: Array) -> list[tuple[BandOp, Array]]:
-        """The take's per-axis usages of a continuous path q (n, 8): the spline's velocity,
-        acceleration and jerk (:mod:`camtraj.ik.spline_ops`) at every knot and piece middle
-        over the limits per frame interval, one (operator, (rows, 8)) pair per operator."""
+    def take_use(self, q: Array) -> TakeUse:
+        """The take's use of the limits along a continuous path q (n, 8) (:class:`TakeUse`)."""
         n = q.shape[0]
-        if n < 3:
-            return [(BandOp(1, np.array([[-1.0, 1.0]]), 0), np.diff(q, axis=0) / self.vel)]
         lims = (self.vel, self.acc, self.jerk)
-        return [(op, op.apply(q) / lims[op.order - 1]) for op in spline_ops(n)]
+        if n < 3:
+            op = BandOp(1, np.array([[-1.0, 1.0]]), 0)
+            return TakeUse([(op, np.diff(q, axis=0) / self.vel)], None)
+        ops = spline_ops(n)
+        zs = [(op, op.apply(q) / lims[op.order - 1]) for op in ops]
+        vel_z, acc_z = zs[0][1], zs[2][1]  # order 1 and 2 at the knots
+        need = self.edge_needs(vel_z[[0, -1]], acc_z[[0, -1]])
+        rows = np.stack([np.stack([ops[0].coef[0], ops[2].coef[0]]),
+                         np.stack([ops[0].coef[-1], ops[2].coef[-1]])])
+        return TakeUse(zs, (*need, rows))
 
-    def edge_needs(self, q: Array) -> tuple[Array, Array, Array, Array]:
+    def edge_needs(self, z1: Array, z2: Array) -> tuple[Array, Array, Array]:
         """The slow-down each end's stop needs to stay under the velocity limit, as a usage.
 
         A jerk-limited stop from a state still accelerating away from rest gains a^2 / 2J of
-        speed before it can brake (the timing stage's ``stop_slowdown``): slowed by s, the
-        state (v, a) becomes (v / s, a / s^2), and the need is the s that solves
+        speed before it can brake (the timing stage's stop check): slowed by s, the state
+        (v, a) becomes (v / s, a / s^2), and the need is the s that solves
         |z1| / s + c z2^2 / s^4 = 1 with c = a_max^2 / (2 J v_max) (s = |z1| without gain).
 
+        Args:
+            z1, z2: The spline's velocity and acceleration usages at the first (row 0) and
+                last frame (row 1), (2, 8).
+
         Returns:
-            s (2, 8) for the run-up (row 0, the state reversed) and the run-out (row 1), its
-            derivatives in the spline's end velocity and acceleration usages (2, 8) each,
-            and the operator rows (2, width) that give those from the frames (first the
-            velocity's, then the acceleration's, stacked: (2, 2, width)).
+            s (2, 8) for the run-up (row 0, the state reversed) and the run-out (row 1), and
+            its derivatives in z1 and z2 (2, 8) each.
         """
-        n = q.shape[0]
-        ops = spline_ops(n)
-        vel_op, acc_op = ops[0], ops[2]  # order 1 and 2 at the knots
-        rows = np.stack([np.stack([vel_op.coef[0], acc_op.coef[0]]),
-                         np.stack([vel_op.coef[-1], acc_op.coef[-1]])])
-        z1 = vel_op.apply(q)[[0, -1]] / self.vel
-        z2 = acc_op.apply(q)[[0, -1]] / self.acc
         c = self.a_max ** 2 / (2.0 * self.j_max * self.vel / self.dt)
         gains = np.stack([z1[0] * z2[0] < 0.0, z1[1] * z2[1] > 0.0]) & (z2 != 0.0)
         a1 = np.abs(z1)
         g = np.where(gains, c * z2 * z2, 0.0)
-        lo, hi = np.zeros_like(a1), np.maximum(a1 + g, 1e-300) + 1.0
-        for _ in range(60):  # |z1| / s + g / s^4 falls with s
-            mid = 0.5 * (lo + hi)
-            fits = a1 * mid ** 3 + g <= mid ** 4
-            hi = np.where(fits, mid, hi)
-            lo = np.where(fits, lo, mid)
-        need = np.where(gains, hi, a1)
+        s = a1 + g ** 0.25  # above the root of s^4 - a1 s^3 - g, where Newton falls to it
+        for _ in range(12):
+            f = s ** 4 - a1 * s ** 3 - g
+            s = np.where(gains, s - f / np.maximum(4.0 * s ** 3 - 3.0 * a1 * s * s, 1e-300), s)
+        need = np.where(gains, s, a1)
         den = np.maximum(4.0 * need - 3.0 * a1, 1e-300)
         d1 = np.where(gains, np.sign(z1) * need / den, np.sign(z1))
-        d2 = np.where(gains, 2.0 * c * z2 / (np.maximum(need, 1e-300) ** 2 * den), 0.0)
-        return need, d1, d2, rows
+        d2 = np.where(gains, 2.0 * c * z2 / np.maximum(need * need * den, 1e-300), 0.0)
+        return need, d1, d2
 
     def peak(self, q: Array) -> float:
         """The peak use P = max(|v|, |a|^(1/2), |j|^(1/3)) over the limits of the spline
         through the path's frames, and the ends' stopping needs: the take runs at most at
         1/P of real time."""
-        out = 0.0
-        for op, z in self.usages(q):
-            out = max(out, float(np.abs(z).max()) ** (1.0 / op.order))
-        if q.shape[0] >= 3:
-            out = max(out, float(self.edge_needs(q)[0].max()))
-        return out
+        return self.take_use(q).peak()
 
-    def peak_norm(self, q: Array) -> float:
-        """Smooth stand-in for :meth:`peak`: ``scale * (sum (u / scale)^power)^(1/power)``
-        over every axis and evaluation point, with u = |v|, |a|^(1/2), |j|^(1/3), and the
-        ends' stopping needs."""
-        return float(self.scale * self.peak_sum(q) ** (1.0 / self.power))
-
-    def peak_sum(self, q: Array) -> float:
-        """The sum inside :meth:`peak_norm`."""
-        phi = 0.0
-        for op, z in self.usages(q):
-            k = op.order
-            phi += float(((np.abs(z) / self.scale ** k) ** (self.power / k)).sum())
-        if q.shape[0] >= 3:
-            phi += float(((self.edge_needs(q)[0] / self.scale) ** self.power).sum())
-        return phi
-
-    def refine_total(self, y: Array) -> float:
+    def refine_total(self, y: Array, use: TakeUse | None = None) -> float:
         """What the refinement minimises for measures y (n, 10):
-        :meth:`peak_norm` + ``refine_margin`` * mean squared margin intrusion
-        + ``tie_break`` * mean motion per step + run-up / run-out room."""
+        ``scale * (sum (u / scale)^power)^(1/power)`` over every use u of the take
+        (:class:`TakeUse`), a smooth stand-in for its peak, + ``refine_margin`` * mean
+        squared margin intrusion (steeper in the last part of a zone) + ``tie_break`` * mean
+        motion per step + run-up / run-out room."""
         q = y[:, :8]
         n = q.shape[0]
         e = self.intrusion(y)
@@ -180,10 +189,11 @@ class ShotCost:
         j = (self.refine_margin * float((e * e).sum()) / n
              + self.close_weight * float((close * close).sum()))
         if n > 1:
-            j += self.peak_norm(q)
+            use = use or self.take_use(q)
+            j += self.scale * use.power_sum(self.power, self.scale) ** (1.0 / self.power)
             j += self.tie_break * float((np.abs(np.diff(q, axis=0) / self.vel)
                                          @ self.motion_coef).sum()) / (n - 1)
-            slow = max(1.0, self.peak(q))
+            slow = max(1.0, use.peak())
             j += self.refine_edge(q[0], q[1], slow) + self.refine_edge(q[-1], q[-2], slow)
         return float(j)
 

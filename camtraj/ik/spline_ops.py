@@ -40,23 +40,34 @@ class BandOp:
         order: Derivative order 1..3.
         coef: (rows, width) weights; columns that fall outside the path are zero.
         offset: Column of ``coef[:, 0]`` relative to the row index.
+        inner: Rows [a, b) that all have the same weights (the shift-invariant kernel);
+            empty for a short path.
     """
 
     order: int
     coef: Array
     offset: int
+    inner: tuple[int, int] = (0, 0)
 
     def apply(self, q: Array) -> Array:
         """Values (rows, m) for frame values q (n, m)."""
         rows, width = self.coef.shape
-        n = q.shape[0]
+        win = np.lib.stride_tricks.sliding_window_view(self._padded(q), width, axis=0)
+        return np.asarray(np.einsum("rw,rmw->rm", self.coef, win[:rows]))
+
+    def rows_at(self, q: Array, rows: list[int]) -> Array:
+        """Values (len(rows), m) of the given rows only."""
+        pad = self._padded(q)
+        width = self.coef.shape[1]
+        return np.stack([self.coef[r] @ pad[r:r + width] for r in rows])
+
+    def _padded(self, q: Array) -> Array:
+        """q with zero frames before and after, so row r reads pad[r:r + width]."""
+        rows, width = self.coef.shape
         pad = np.zeros((rows + width, q.shape[1]))
         lo = -self.offset  # q[j] sits at padded index j + lo
-        pad[lo:lo + n] = q[: rows + width - lo]
-        out = np.zeros((rows, q.shape[1]))
-        for o in range(width):
-            out += self.coef[:, o, None] * pad[o:o + rows]
-        return out
+        pad[lo:lo + q.shape[0]] = q[: rows + width - lo]
+        return pad
 
 
 def _derivative(c: Array, d: int, tau: float) -> Array:
@@ -98,8 +109,9 @@ def spline_ops(n: int) -> tuple[BandOp, ...]:
     dense = _responses(m)
     ops = []
     for (d, _tau), resp in dense.items():
-        diff = np.diff(np.eye(m), d, axis=0)  # (m - d, m)
-        weights = resp @ np.linalg.pinv(diff)  # resp == weights @ diff
+        weights = resp
+        for _ in range(d):  # resp == weights @ (d-th difference matrix): undo one at a time
+            weights = -np.cumsum(weights, axis=1)[:, :-1]
         rows_m = resp.shape[0]
         wa, oa = 2 * k + 2 - d, -k
         idx = np.arange(rows_m)[:, None] + oa + np.arange(wa)[None, :]
@@ -108,6 +120,7 @@ def spline_ops(n: int) -> tuple[BandOp, ...]:
                         0.0)
         rows = rows_m + (n - m)
         a = np.zeros((rows, wa))
+        inner = (0, 0)
         if small:
             a[:] = band
         else:
@@ -115,11 +128,12 @@ def spline_ops(n: int) -> tuple[BandOp, ...]:
             a[:half] = band[:half]
             a[rows - (rows_m - half):] = band[half:]
             a[half:rows - (rows_m - half)] = band[half]  # the shift-invariant kernel
+            inner = (half, rows - (rows_m - half))
         stencil = np.diff(np.eye(d + 1), d, axis=0)[0]  # d-th difference weights
         coef = np.zeros((rows, wa + d))
         for j, c in enumerate(stencil):
             coef[:, j:j + wa] += c * a
-        ops.append(BandOp(d, coef, oa))
+        ops.append(BandOp(d, coef, oa, inner))
     return tuple(ops)
 
 
