@@ -101,10 +101,14 @@ class IKSettings:
     stretch_margin, wrist_margin: widths of the zones [rad] near full stretch and near the
         wrist singularity (tilt ±90°) where a margin cost applies.
     limit_margin_prismatic [m], limit_margin_revolute [rad]: the same near position limits.
-    motion_weight, velocity_weight, overspeed_weight, acceleration_weight, jerk_weight,
-        margin_weight: the weights of the objective's terms.
+    motion_weight, velocity_weight, overspeed_weight, margin_weight: the weights of the
+        dynamic programme's terms (``camtraj.ik.shot_cost``).
+    peak_margin_weight, tie_break_weight: the weights of the margins and of the papers'
+        weighted motion F next to the take's peak use in the refinement.
     track_samples, extend_samples: the candidate grid (``camtraj.ik.shot``).
-    refine_rounds: most Gauss-Newton steps of the continuous refinement.
+    refine_rounds: most Gauss-Newton steps of each stage of the refinement.
+    refine_tolerance: a stage has converged after three steps in a row that lower its
+        objective by less than this fraction.
     """
 
     objective: str = "shot"
@@ -115,12 +119,13 @@ class IKSettings:
     motion_weight: float = 1.0
     velocity_weight: float = 1.0
     overspeed_weight: float = 1000.0
-    acceleration_weight: float = 1.0
-    jerk_weight: float = 1.0
     margin_weight: float = 10.0
+    peak_margin_weight: float = 0.1
+    tie_break_weight: float = 0.01
     track_samples: int = 2
     extend_samples: int = 2
-    refine_rounds: int = 6
+    refine_rounds: int = 25
+    refine_tolerance: float = 1e-4
 
 
 @dataclass(frozen=True)
@@ -471,12 +476,13 @@ _IK_RANGES: dict[str, tuple[float, float, str]] = {
     "motion_weight": (0.0, 1e4, ""),
     "velocity_weight": (0.0, 1e4, ""),
     "overspeed_weight": (0.0, 1e6, ""),
-    "acceleration_weight": (0.0, 1e4, ""),
-    "jerk_weight": (0.0, 1e4, ""),
     "margin_weight": (0.0, 1e4, ""),
+    "peak_margin_weight": (0.0, 1e4, ""),
+    "tie_break_weight": (0.0, 1e4, ""),
     "track_samples": (1, 16, "int"),
     "extend_samples": (1, 16, "int"),
-    "refine_rounds": (0, 100, "int"),
+    "refine_rounds": (0, 1000, "int"),
+    "refine_tolerance": (1e-12, 0.1, ""),
 }
 
 

@@ -680,14 +680,15 @@ EFFORT = 10
 
 
 def with_effort(robot: Robot, k: float) -> Robot:
-    """``robot`` with k times the IK effort: k times the refinement rounds and about k times
-    the candidates (sqrt(k) times the track and extend samples each). The one place that knows
-    the solver's effort knobs."""
+    """``robot`` with k times the IK effort: k times the refinement rounds per stage, a k times
+    tighter convergence test and about k times the candidates (sqrt(k) times the track and
+    extend samples each). The one place that knows the solver's effort knobs."""
     ik = robot.ik
     grid = math.sqrt(k)
     return dataclasses.replace(robot, ik=dataclasses.replace(
         ik,
-        refine_rounds=min(100, round(ik.refine_rounds * k)),
+        refine_rounds=min(1000, round(ik.refine_rounds * k)),
+        refine_tolerance=ik.refine_tolerance / k,
         track_samples=min(16, max(1, round(ik.track_samples * grid))),
         extend_samples=min(16, max(1, round(ik.extend_samples * grid))),
     ))

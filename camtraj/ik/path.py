@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from threadpoolctl import threadpool_limits
 
 from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
@@ -126,7 +127,8 @@ def solve_path_report(
               f"{frame_interval!r}"
         raise ValueError(msg)
     if obj == "shot":
-        q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames)
+        with threadpool_limits(limits=1, user_api="blas"):
+            q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames)
         if progress is not None:
             progress(n)
     else:
@@ -206,7 +208,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         return feasible_speed(q, times, limits) if n > 1 else math.inf
 
     ref = refine(robot, cost, targets, choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
-                 np.maximum(hi1, x0[:, 0]), rounds=max(25, s.refine_rounds),
+                 np.maximum(hi1, x0[:, 0]), rounds=s.refine_rounds, tolerance=s.refine_tolerance,
                  take_speed=take_speed)
     return ref.y[:, :8]
 

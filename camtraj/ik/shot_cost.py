@@ -1,25 +1,36 @@
 """The ``shot`` objective: what a whole-shot choice of (track, extend, branch) minimises.
 
-For a joint path q (n, 8) at frame interval dt, with per-axis usages of the robot's limits
+What a crew reads first is the take's maximum feasible speed: 1 / P, with P the take's peak
+use of the limits,
 
-    z1 = dq / (v_max dt),   z2 = d2q / (a_max dt^2),   z3 = d3q / (j_max dt^3)
+    P = max over axes and time of  max(|v| / v_max, (|a| / a_max)^(1/2), (|j| / j_max)^(1/3))
 
-(finite differences between consecutive frames), the objective is
+(velocity scales with the speed of the take, acceleration with its square, jerk with its
+cube), taken along the spline the timing stage moves on (:mod:`camtraj.ik.spline_ops`), with
+the ends' stopping needs (a shot that ends still accelerating needs a slower take for its
+run-out to stay under the velocity limit). The solver works in two passes:
 
-    J = sum over transitions and axes of  motion * m_i |z1| + velocity * z1^2
-                                        + overspeed * max(0, |z1| - 1)^2
-      + sum over frames of  acceleration * z2^2 + jerk * z3^2
-      + margin * sum over frames of the squared margin intrusions
-        max(0, 1 - d / zone)^2 for every axis's distance d to its nearer position limit, the
-        wrist singularity distance and the full-stretch distance (:mod:`camtraj.ik.margins`).
+* The dynamic programme chooses one candidate per frame by frame-to-frame differences, with
+  per-axis velocity usages z1 = dq / (v_max dt):
 
-``m_i = w_i v_i / sum(w v)``: the papers' weighted motion F in units of "every axis moving one
-frame at its velocity limit", so ``motion * sum(m |z1|)`` is F rescaled. The first-order terms
-(motion, velocity, overspeed) and the margins are what the dynamic programme sees; acceleration
-and jerk join in the continuous refinement. The first frame carries no motion term: the run-up
-brings the robot there, whatever the start. A shot that starts or ends in motion needs room for
-its run-up and run-out: the first and last frames' positions pushed out by each axis's stopping
-distance at its edge velocity carry the same margin cost (``edge_cost``).
+      sum over steps and axes of  motion * m_i |z1| + velocity * z1^2
+                                + overspeed * max(0, |z1| - 1)^2
+      + margin * sum over frames of the squared margin intrusions,
+
+  ``m_i = w_i v_i / sum(w v)`` making ``motion * sum(m |z1|)`` the papers' weighted motion F
+  in units of "every axis moving one frame at its velocity limit"; a margin intrusion is
+  max(0, 1 - d / zone) for each axis's distance d to its nearer position limit, the wrist
+  singularity distance and the full-stretch distance (:mod:`camtraj.ik.margins`).
+* The refinement lowers P itself through a smooth stand-in, the power mean
+  ``scale * (sum (u / scale)^power)^(1/power)`` over every use u of the take (raised in
+  stages towards the maximum), plus ``refine_margin`` times the mean squared margin
+  intrusion (steeper in the last fifth of a zone), ``tie_break`` times the mean F per step,
+  and the run-up and run-out room (:meth:`ShotCost.refine_total`).
+
+The first frame carries no motion term: the run-up brings the robot there, whatever the start.
+A shot that starts or ends in motion needs room for its run-up and run-out: the first and last
+frames' positions pushed out by each axis's stopping distance at its edge velocity (at the
+speed the take will run at) carry the margin cost, and a steep cost past a limit.
 """
 
 from __future__ import annotations
@@ -82,8 +93,12 @@ class ShotCost:
         vel, acc, jerk: What each axis may do in one frame interval: v_max dt, a_max dt^2,
             j_max dt^3 (8,).
         motion_coef: ``motion * m_i`` (8,).
-        velocity, overspeed, acceleration, jerk_weight, margin: The weights.
+        velocity, overspeed, margin: The dynamic programme's weights.
         zone: Width of the margin zone (10,): per axis [m, rad], then wrist and stretch [rad].
+        dt: Frame interval [s]; a_max, j_max: acceleration and jerk limits (8,).
+        refine_margin, close_weight, tie_break: The refinement's weights of the mean squared
+            margin intrusion, of the steep part of a zone, and of the mean F per step.
+        power, scale: The refinement's power mean of the take's uses.
     """
 
     lower: Array
@@ -94,8 +109,6 @@ class ShotCost:
     motion_coef: Array
     velocity: float
     overspeed: float
-    acceleration: float
-    jerk_weight: float
     margin: float
     zone: Array
     dt: float
@@ -118,7 +131,7 @@ class ShotCost:
             acc=robot.max_acceleration * dt * dt, jerk=robot.max_jerk * dt ** 3,
             motion_coef=s.motion_weight * wv / max(float(wv.sum()), 1e-300),
             velocity=s.velocity_weight, overspeed=s.overspeed_weight,
-            acceleration=s.acceleration_weight, jerk_weight=s.jerk_weight,
+            refine_margin=s.peak_margin_weight, tie_break=s.tie_break_weight,
             margin=s.margin_weight,
             zone=np.concatenate([zone_axes, [s.wrist_margin, s.stretch_margin]]),
             dt=dt, a_max=robot.max_acceleration, j_max=robot.max_jerk,
@@ -279,18 +292,3 @@ class ShotCost:
         """Margin cost (...) of the run-up or run-out room at a shot's end frame."""
         e = self.edge_intrusion(self.edge_excursion(q_edge, q_inner)[0])
         return np.asarray(self.margin * (e * e).sum(axis=-1))
-
-    def total(self, y: Array) -> float:
-        """J of a continuous path with measures y (n, 10) (joints unwrapped)."""
-        q = y[:, :8]
-        j = float(self.unary(y).sum())
-        if q.shape[0] > 1:
-            j += float(self.first_order(np.diff(q, axis=0) / self.vel).sum())
-            j += float(self.edge_cost(q[0], q[1]) + self.edge_cost(q[-1], q[-2]))
-        if q.shape[0] > 2:
-            z2 = np.diff(q, 2, axis=0) / self.acc
-            j += self.acceleration * float((z2 * z2).sum())
-        if q.shape[0] > 3:
-            z3 = np.diff(q, 3, axis=0) / self.jerk
-            j += self.jerk_weight * float((z3 * z3).sum())
-        return j
