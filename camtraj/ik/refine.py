@@ -305,13 +305,34 @@ def _gather(op: BandOp, dz: Array, w: Array, gq: Array, M: Array, pad: int) -> N
     for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
         if hi <= lo:
             continue
-        c, zd, ww = coef[lo:hi], dz[lo:hi], w[lo:hi]
-        for o1 in range(width):
-            c1 = c[:, o1, None]
-            at = base + lo + o1
-            gq[at:at + hi - lo] += c1 * zd
-            # couplings of o1 with o2 = o1 .. width - 1, all distances d = o2 - o1 at once
-            M[: width - o1, at:at + hi - lo] += c[:, o1:].T[:, :, None] * (c1 * ww)[None]
+        # rows lo..hi read frames lo + offset .. hi - 1 + offset + width - 1: as a dense
+        # (rows, frames) matrix C, they add C^T dz and C^T diag(w) C (per axis)
+        c = _dense_rows(op, lo, hi)
+        f0 = base + lo
+        span = c.shape[1]
+        gq[f0:f0 + span] += c.T @ dz[lo:hi]
+        full = (c.T[None] * w[lo:hi].T[:, None, :]) @ c  # (8, span, span)
+        at, dist = _upper_pairs(span, width)
+        M[dist, f0 + at] += full[:, at, at + dist].T  # each (frame, distance) pair once
+
+
+@lru_cache(maxsize=64)
+def _upper_pairs(span: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Frame f and distance d of every pair (f, f + d), d < width, inside ``span`` frames."""
+    f, d = np.meshgrid(np.arange(span), np.arange(width), indexing="ij")
+    keep = f + d < span
+    return f[keep], d[keep]
+
+
+def _dense_rows(op: BandOp, lo: int, hi: int) -> Array:
+    """Rows lo..hi of an operator as a dense (hi - lo, hi - lo + width - 1) matrix whose
+    column k is frame lo + offset + k."""
+    rows = hi - lo
+    width = op.coef.shape[1]
+    out = np.zeros((rows, rows + width - 1))
+    r = np.arange(rows)[:, None]
+    out[r, r + np.arange(width)[None, :]] = op.coef[lo:hi]
+    return out
 
 
 def _solve_banded(H: Array, g: Array, mu: float) -> Array:

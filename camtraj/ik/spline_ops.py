@@ -52,8 +52,15 @@ class BandOp:
     def apply(self, q: Array) -> Array:
         """Values (rows, m) for frame values q (n, m)."""
         rows, width = self.coef.shape
-        win = np.lib.stride_tricks.sliding_window_view(self._padded(q), width, axis=0)
-        return np.asarray(np.einsum("rw,rmw->rm", self.coef, win[:rows]))
+        win = np.lib.stride_tricks.sliding_window_view(self._padded(q), width, axis=0)[:rows]
+        a, b = self.inner
+        if b <= a:
+            return np.asarray(np.einsum("rw,rmw->rm", self.coef, win))
+        out = np.empty((rows, q.shape[1]))
+        out[a:b] = win[a:b] @ self.coef[a]  # the shift-invariant rows: one product
+        out[:a] = np.einsum("rw,rmw->rm", self.coef[:a], win[:a])
+        out[b:] = np.einsum("rw,rmw->rm", self.coef[b:], win[b:])
+        return out
 
     def rows_at(self, q: Array, rows: list[int]) -> Array:
         """Values (len(rows), m) of the given rows only."""
