@@ -416,7 +416,7 @@ def _overshoot(path: FramePath, law: _TimeLaw, limits: Limits) -> float:
     """
     a, b = law.a, law.b
     h = 1.0 / CHECK_PER_FRAME
-    x: Array = a + np.arange((b - a) * CHECK_PER_FRAME + 1) * h
+    x: Array = a + np.arange((b - a) * CHECK_PER_FRAME + 1, dtype=np.float64) * h
     need = _need(path, law, limits, x)
     knots = np.arange(a + 1, b + 1)
     knot_x: Array = np.asarray(knots, dtype=np.float64)
