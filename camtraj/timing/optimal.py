@@ -21,7 +21,7 @@ programs (scipy's HiGHS), each linearised at the previous answer (sequential con
 programming after Debrouwere et al., "Time-optimal path following for robots with trajectory
 jerk constraints using sequential convex programming", ICRA 2013). Every answer is feasible
 for the next program, so the time never grows; it stops when the time changes by less than
-:data:`SCP_RTOL`.
+:data:`SCP_RTOL`. Long stretches are solved in overlapping windows (:func:`_solve_stretch`).
 
 The answer is then checked between the points: the analytic values on a grid
 :data:`CHECK_PER_FRAME` times finer and on every servo sample, and the divided differences of
@@ -269,7 +269,8 @@ def _solve_stretch(
     shot_start, shot_end = a == 0, b == path.n - 1
     safe = _safe_speeds(path, a, b, limits, u_scale)
     k = KNOTS_PER_FRAME
-    coef = np.full((b - a) * k + 3, min(1.0, float(safe[0])) if shot_start else float(safe[0]))
+    start = min(1.0, float(safe[0])) if shot_start or shot_end else float(safe[0])
+    coef = np.full((b - a) * k + 3, start)
     s = a
     while True:
         last = b - s <= WINDOW + LOOKAHEAD
@@ -289,6 +290,11 @@ def _solve_stretch(
         s += WINDOW
     law = _TimeLaw(a, b, coef * u_scale)
     factor = _overshoot(path, law, limits)
+    # At the shot's ends no faster than scale (the programs meet that to their tolerance).
+    ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
+    if ends:
+        u_end = law.derivs(np.array(ends))[0] / u_scale
+        factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
     if not math.isfinite(factor):
         return None
     return law.slowed(factor) if factor > 1.0 else law
