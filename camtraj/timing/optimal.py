@@ -79,6 +79,10 @@ SPEED_RANGE = (1e-2, 1e3)
 #: the solver's tolerance meets them when its state starts the next window (the check after
 #: the programs removes what that and the points' spacing let through).
 LP_SLACK = 1e-6
+#: Where the answer is over a limit between the programs' points by more than this (as a
+#: slow-down), those places are added to the programs, at most REPAIRS times.
+REPAIR_ABOVE = 2e-3
+REPAIRS = 2
 #: Long stretches are solved in windows of this many frames, each looking this many
 #: frames further ahead.
 WINDOW = 48
@@ -265,9 +269,44 @@ def _solve_stretch(
     the first WINDOW frames are kept and the next window starts in their end state. The rest
     of the previous window followed by that constant speed is feasible for the next window,
     so every window has a feasible start and its time never grows.
+
+    Where the check finds the answer over a limit between the programs' points by more than
+    :data:`REPAIR_ABOVE`, the worst places become points of the programs too and the stretch
+    is solved again (at most :data:`REPAIRS` times); what is left is removed by slowing the
+    whole law uniformly.
     """
     shot_start, shot_end = a == 0, b == path.n - 1
     safe = _safe_speeds(path, a, b, limits, u_scale)
+    extra = np.zeros(0)
+    best: _TimeLaw | None = None
+    for _repair in range(REPAIRS + 1):
+        coef = _windows(path, a, b, limits, u_scale, safe, extra)
+        if coef is None:
+            break
+        law = _TimeLaw(a, b, coef * u_scale)
+        factor, worst_x = _overshoot(path, law, limits)
+        # At the shot's ends no faster than scale (the programs meet that to their tolerance).
+        ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
+        if ends:
+            u_end = law.derivs(np.array(ends))[0] / u_scale
+            factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
+        if not math.isfinite(factor):
+            break
+        slowed = law.slowed(factor) if factor > 1.0 else law
+        if best is None or slowed.frame_durations().sum() < best.frame_durations().sum():
+            best = slowed
+        if factor <= 1.0 + REPAIR_ABOVE or worst_x.size == 0:
+            break
+        extra = np.union1d(extra, worst_x)
+    return best
+
+
+def _windows(path: FramePath, a: int, b: int, limits: Limits, u_scale: float, safe: Array,
+             extra: Array) -> Array | None:
+    """The control values of ``u`` on frames a..b, window by window (see
+    :func:`_solve_stretch`), with the programs' points plus ``extra``; None if a program
+    fails."""
+    shot_start, shot_end = a == 0, b == path.n - 1
     k = KNOTS_PER_FRAME
     start = min(1.0, float(safe[0])) if shot_start or shot_end else float(safe[0])
     coef = np.full((b - a) * k + 3, start)
@@ -278,7 +317,8 @@ def _solve_stretch(
         end_cap = (1.0 if shot_end else None) if last else float(safe[e - a])
         rows = _Rows.build(path, s, e, limits, u_scale,
                            fixed=None if s == a else coef[(s - a) * k : (s - a) * k + 3],
-                           start_cap=1.0 if s == a and shot_start else None, end_cap=end_cap)
+                           start_cap=1.0 if s == a and shot_start else None, end_cap=end_cap,
+                           extra=extra[(extra >= s) & (extra <= e)])
         # From the candidate: what is known so far, then the constant speed it ends in.
         window = _scp(rows, coef[(s - a) * k : (e - a) * k + 3].copy())
         if window is None:
@@ -288,16 +328,7 @@ def _solve_stretch(
             break
         coef[(e - a) * k + 3 :] = window[-1]
         s += WINDOW
-    law = _TimeLaw(a, b, coef * u_scale)
-    factor = _overshoot(path, law, limits)
-    # At the shot's ends no faster than scale (the programs meet that to their tolerance).
-    ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
-    if ends:
-        u_end = law.derivs(np.array(ends))[0] / u_scale
-        factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
-    if not math.isfinite(factor):
-        return None
-    return law.slowed(factor) if factor > 1.0 else law
+    return coef
 
 
 def _scp(rows: _Rows, coef: Array) -> Array | None:
@@ -371,10 +402,11 @@ class _Rows:
 
     @classmethod
     def build(cls, path: FramePath, a: int, b: int, limits: Limits, u_scale: float, *,
-              fixed: Array | None, start_cap: float | None, end_cap: float | None) -> _Rows:
+              fixed: Array | None, start_cap: float | None, end_cap: float | None,
+              extra: Array) -> _Rows:
         """The rows on frames a..b. At a: the first three control values ``fixed``, or
         ``u <= start_cap`` with u' = u'' = 0, or free (both None); at b: ``u <= end_cap``
-        with u' = u'' = 0, or free (None)."""
+        with u' = u'' = 0, or free (None). ``extra``: more points (inside [a, b])."""
         from scipy.sparse import csr_matrix, vstack
 
         ncoef = (b - a) * KNOTS_PER_FRAME + 3
@@ -382,9 +414,9 @@ class _Rows:
         # with the path's jerk from the piece before it (it may step there).
         xs = a + np.arange((b - a) * POINTS_PER_FRAME + 1) / POINTS_PER_FRAME
         knots = np.arange(a + 1, b + 1)
-        pts = np.concatenate([xs, knots.astype(np.float64)])
+        pts = np.concatenate([xs, knots.astype(np.float64), extra])
         _, p1, p2, p3 = path.at(pts, 3)
-        p3[xs.size :] = path.knot_jerk_from_left()[knots - 1]
+        p3[xs.size : xs.size + knots.size] = path.knot_jerk_from_left()[knots - 1]
         idx, weights = _basis(pts, a, b)
         m = pts.size
         cols = (idx[:, None] + np.arange(4)).ravel()
@@ -454,6 +486,7 @@ class _Rows:
         """One linear program linearised at ``u0``; rows are added as they are needed (those
         the previous answer ``coef0`` uses at least :data:`ACTIVE_USE` first)."""
         from scipy.optimize import linprog
+        from scipy.sparse import csr_matrix, vstack
 
         mat, rhs = self._program(u0)
         use = self.g @ coef0
@@ -468,8 +501,6 @@ class _Rows:
             extra_a, extra_b = self.end, np.full(self.end.shape[0], 1.0 + LP_SLACK)
         else:
             extra_a, extra_b = np.zeros((0, self.ncoef)), np.zeros(0)
-        from scipy.sparse import csr_matrix, vstack
-
         for _round in range(ROW_ROUNDS):
             if _round == ROW_ROUNDS - 1:
                 active[:] = True
@@ -488,8 +519,9 @@ class _Rows:
         return None  # pragma: no cover - the last round has every row
 
 
-def _overshoot(path: FramePath, law: _TimeLaw, limits: Limits) -> float:
-    """The uniform slow-down that brings the law inside every limit (<= 1: none needed).
+def _overshoot(path: FramePath, law: _TimeLaw, limits: Limits) -> tuple[float, Array]:
+    """The uniform slow-down that brings the law inside every limit (<= 1: none needed), and
+    the places between frames where the law is over a limit (the worst of each peak).
 
     The need is read on a grid of :data:`CHECK_PER_FRAME` points per frame interval, on both
     sides of every frame (the path's jerk may step there), and around every grid point
@@ -509,10 +541,13 @@ def _overshoot(path: FramePath, law: _TimeLaw, limits: Limits) -> float:
     peak[1:] &= need[1:] >= need[:-1]
     peak[:-1] &= need[:-1] >= need[1:]
     near = x[peak]
-    fine = (near[:, None] + np.linspace(-h, h, 2 * REFINE + 1)).ravel()
-    fine = fine[(fine >= a) & (fine <= b)]
-    worst = max(worst, float(_need(path, law, limits, fine).max()))
-    return worst * (1.0 + CHECK_RTOL)
+    fine = np.clip(near[:, None] + np.linspace(-h, h, 2 * REFINE + 1), a, b)
+    need_fine = _need(path, law, limits, fine.ravel()).reshape(fine.shape)
+    top = np.argmax(need_fine, axis=1)
+    top_need = need_fine[np.arange(fine.shape[0]), top]
+    worst = max(worst, float(top_need.max()) if top_need.size else 0.0)
+    over: Array = fine[np.arange(fine.shape[0]), top][top_need > 1.0]
+    return worst * (1.0 + CHECK_RTOL), over
 
 
 def _need(path: FramePath, law: _TimeLaw, limits: Limits, x: Array,
