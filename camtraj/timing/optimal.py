@@ -56,7 +56,7 @@ IntArray = NDArray[np.int64]
 #: Cubic B-spline segments of ``u(x)`` per frame interval.
 KNOTS_PER_FRAME = 2
 #: Points per frame interval where the linear programs impose the limits.
-POINTS_PER_FRAME = 4
+POINTS_PER_FRAME = 6
 #: Points per frame interval of the check between the programs' points, and how much finer
 #: it looks around the worst of them.
 CHECK_PER_FRAME = 48
@@ -81,7 +81,7 @@ SPEED_RANGE = (1e-2, 1e3)
 LP_SLACK = 1e-6
 #: Where the answer is over a limit between the programs' points by more than this (as a
 #: slow-down), those places are added to the programs, at most REPAIRS times.
-REPAIR_ABOVE = 2e-3
+REPAIR_ABOVE = 1e-2
 REPAIRS = 2
 #: Long stretches are solved in windows of this many frames, each looking this many
 #: frames further ahead.
@@ -270,43 +270,13 @@ def _solve_stretch(
     of the previous window followed by that constant speed is feasible for the next window,
     so every window has a feasible start and its time never grows.
 
-    Where the check finds the answer over a limit between the programs' points by more than
-    :data:`REPAIR_ABOVE`, the worst places become points of the programs too and the stretch
-    is solved again (at most :data:`REPAIRS` times); what is left is removed by slowing the
-    whole law uniformly.
+    Where the check finds a window's answer over a limit between the programs' points by
+    more than :data:`REPAIR_ABOVE`, the worst places become points of its programs too and
+    the window is solved again (at most :data:`REPAIRS` times). What is left over the whole
+    stretch is removed by slowing the whole law uniformly.
     """
     shot_start, shot_end = a == 0, b == path.n - 1
     safe = _safe_speeds(path, a, b, limits, u_scale)
-    extra = np.zeros(0)
-    best: _TimeLaw | None = None
-    for _repair in range(REPAIRS + 1):
-        coef = _windows(path, a, b, limits, u_scale, safe, extra)
-        if coef is None:
-            break
-        law = _TimeLaw(a, b, coef * u_scale)
-        factor, worst_x = _overshoot(path, law, limits)
-        # At the shot's ends no faster than scale (the programs meet that to their tolerance).
-        ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
-        if ends:
-            u_end = law.derivs(np.array(ends))[0] / u_scale
-            factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
-        if not math.isfinite(factor):
-            break
-        slowed = law.slowed(factor) if factor > 1.0 else law
-        if best is None or slowed.frame_durations().sum() < best.frame_durations().sum():
-            best = slowed
-        if factor <= 1.0 + REPAIR_ABOVE or worst_x.size == 0:
-            break
-        extra = np.union1d(extra, worst_x)
-    return best
-
-
-def _windows(path: FramePath, a: int, b: int, limits: Limits, u_scale: float, safe: Array,
-             extra: Array) -> Array | None:
-    """The control values of ``u`` on frames a..b, window by window (see
-    :func:`_solve_stretch`), with the programs' points plus ``extra``; None if a program
-    fails."""
-    shot_start, shot_end = a == 0, b == path.n - 1
     k = KNOTS_PER_FRAME
     start = min(1.0, float(safe[0])) if shot_start or shot_end else float(safe[0])
     coef = np.full((b - a) * k + 3, start)
@@ -315,12 +285,23 @@ def _windows(path: FramePath, a: int, b: int, limits: Limits, u_scale: float, sa
         last = b - s <= WINDOW + LOOKAHEAD
         e = b if last else s + WINDOW + LOOKAHEAD
         end_cap = (1.0 if shot_end else None) if last else float(safe[e - a])
-        rows = _Rows.build(path, s, e, limits, u_scale,
-                           fixed=None if s == a else coef[(s - a) * k : (s - a) * k + 3],
-                           start_cap=1.0 if s == a and shot_start else None, end_cap=end_cap,
-                           extra=extra[(extra >= s) & (extra <= e)])
         # From the candidate: what is known so far, then the constant speed it ends in.
-        window = _scp(rows, coef[(s - a) * k : (e - a) * k + 3].copy())
+        candidate = coef[(s - a) * k : (e - a) * k + 3].copy()
+        extra = np.zeros(0)
+        window: Array | None = None
+        for _repair in range(REPAIRS + 1):
+            rows = _Rows.build(path, s, e, limits, u_scale,
+                               fixed=None if s == a else candidate[:3],
+                               start_cap=1.0 if s == a and shot_start else None,
+                               end_cap=end_cap, extra=extra)
+            found = _scp(rows, candidate)
+            if found is None:
+                break
+            window = found
+            factor, worst_x = _overshoot(path, _TimeLaw(s, e, window * u_scale), limits)
+            if factor <= 1.0 + REPAIR_ABOVE or worst_x.size == 0:
+                break
+            extra = np.union1d(extra, worst_x)
         if window is None:
             return None
         coef[(s - a) * k : (e - a) * k + 3] = window
@@ -328,7 +309,16 @@ def _windows(path: FramePath, a: int, b: int, limits: Limits, u_scale: float, sa
             break
         coef[(e - a) * k + 3 :] = window[-1]
         s += WINDOW
-    return coef
+    law = _TimeLaw(a, b, coef * u_scale)
+    factor, _ = _overshoot(path, law, limits)
+    # At the shot's ends no faster than scale (the programs meet that to their tolerance).
+    ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
+    if ends:
+        u_end = law.derivs(np.array(ends))[0] / u_scale
+        factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
+    if not math.isfinite(factor):
+        return None
+    return law.slowed(factor) if factor > 1.0 else law
 
 
 def _scp(rows: _Rows, coef: Array) -> Array | None:
