@@ -23,12 +23,14 @@ jerk constraints using sequential convex programming", ICRA 2013). Every answer 
 for the next program, so the time never grows; it stops when the time changes by less than
 :data:`SCP_RTOL`. Long stretches are solved in overlapping windows (:func:`_solve_stretch`).
 
-The answer is then checked between the points: the analytic values on a grid
-:data:`CHECK_PER_FRAME` times finer and on every servo sample, and the divided differences of
-the sampled positions; whatever small excess the points missed is removed by playing the
-whole time law uniformly slower by just enough (velocity scales with the slow-down, jerk with
-its cube). If the answer is not faster than ``"scale"`` mode, :func:`optimal` returns None
-and the caller keeps the scale take.
+The answer is then checked between the points, by its analytic values on a grid
+:data:`CHECK_PER_FRAME` times finer (refined around the peaks). Where it is over a limit by
+more than :data:`REPAIR_ABOVE`, those places become points of the programs and they are
+solved again; the small excess left is removed by playing the whole time law uniformly slower
+by just enough (velocity scales with the slow-down, jerk with its cube). The servo samples
+are checked once more, by their analytic values and by divided differences of the sampled
+positions. If the answer is not shorter than the ``"scale"`` take, :func:`optimal` returns
+None and the caller keeps the scale take.
 
 Stretches where no axis moves are kept as holds of their original duration. The path is
 still at the two ends of a hold (every axis is clamped to the hold's line with zero
@@ -299,7 +301,7 @@ def _solve_stretch(
                 break
             window = found
             factor, worst_x = _overshoot(path, _TimeLaw(s, e, window * u_scale), limits)
-            if factor <= 1.0 + REPAIR_ABOVE or worst_x.size == 0:
+            if not math.isfinite(factor) or factor <= 1.0 + REPAIR_ABOVE or worst_x.size == 0:
                 break
             extra = np.union1d(extra, worst_x)
         if window is None:
