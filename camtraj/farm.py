@@ -265,7 +265,7 @@ def openjd_template(
             "allowedValues": list(TIMING_MODES),
             "default": options.timing,
             "description": "shot: keep the shot's timing; scale: slow it to fit the limits; "
-            "optimal: retime optimally.",
+            "optimal: retime time-optimally under velocity, acceleration and jerk limits.",
         }
     )
     params.append(

@@ -35,8 +35,6 @@ IntArray = NDArray[np.int64]
 QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
 #: Above 1 + this fraction of a limit a sample counts as over it (float round-off only).
 LIMIT_RTOL = 1e-9
-#: The same for an "optimal" take: toppra is discretised (timing.OPTIMAL_SLACK).
-OPTIMAL_RTOL = 1e-3
 #: The same for a take read back from MCAP: its jerk is by differences of the recorded
 #: accelerations, which sit on the jerk limit to ~1e-8 in the run-up and run-out.
 MCAP_RTOL = 1e-6
@@ -320,8 +318,7 @@ def from_analysis(
             max_speed=float(take.report.max_speed), t=take.t, q=take.q, qd=take.qd,
             qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
-            tolerance=OPTIMAL_RTOL if take.mode == "optimal" else LIMIT_RTOL,
-            violations=_violations(take.report.exceeded),
+            tolerance=LIMIT_RTOL,
         )
         return data
     empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, 8) for k in ("q", "qd", "qdd",
@@ -459,7 +456,7 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
         poses=poses, pose_frames=pose_frames, track=track, warnings=warnings,
-        tolerance=OPTIMAL_RTOL if mode == "optimal" else MCAP_RTOL, source=str(source),
+        tolerance=MCAP_RTOL, source=str(source),
     )
     return _with_violations(data)
 
