@@ -37,8 +37,8 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from mcap.exceptions import CRCValidationError
 from mcap.reader import make_reader
+from mcap.stream_reader import CRCValidationError
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
