@@ -86,8 +86,8 @@ def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) 
         reason = getattr(exc, "strerror", None) or str(exc)
         msg = f"{where}: cannot read it ({reason})"
         raise error(msg) from None
-    with os.fdopen(fd, "rb") as stream:  # O_NONBLOCK: opening a FIFO does not wait
-        st = os.fstat(stream.fileno())
+    try:  # O_NONBLOCK: opening a FIFO does not wait for a writer
+        st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             kind = _KIND.get(stat.S_IFMT(st.st_mode), "not a regular file")
             msg = f"{where}: cannot read it: it is {kind}, not a regular file"
@@ -95,11 +95,13 @@ def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) 
         if st.st_size > MAX_TEXT_BYTES:
             msg = f"{where}: {st.st_size} bytes is too large for a {what}"
             raise error(msg)
-        try:
+        with os.fdopen(os.dup(fd), "rb") as stream:
             data = stream.read()
-        except OSError as exc:
-            msg = f"{where}: cannot read it ({exc.strerror or exc})"
-            raise error(msg) from None
+    except OSError as exc:
+        msg = f"{where}: cannot read it ({exc.strerror or exc})"
+        raise error(msg) from None
+    finally:
+        os.close(fd)
     for bom, name in ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
                       (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16")):
         if data.startswith(bom):

@@ -299,6 +299,11 @@ def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
 # Robot description file
 # ---------------------------------------------------------------------------------------------
 
+MAX_FILE_VALUE = 1.0e6
+"""Largest magnitude of a joint limit in a robot file (m, deg; per s, s², s³): beyond it the
+solver's arithmetic overflows, and no machine comes near it."""
+
+
 def _read_text(path: Path) -> str:
     """The file's text, refusing what is not a regular UTF-8 file (a FIFO would block)."""
     return read_text(path, "robot file", RobotFileError)
@@ -366,9 +371,12 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         lo, hi = cols["min"][-1], cols["max"][-1]
         if not lo < hi:
             raise fail(f"{key}", f"min ({jt['min']}) must be below max ({jt['max']})")
+        if max(abs(jt["min"]), abs(jt["max"])) > MAX_FILE_VALUE:
+            raise fail(key, f"min and max must lie within ±{MAX_FILE_VALUE:g}")
         for col in ("max_velocity", "max_acceleration", "max_jerk"):
-            if not cols[col][-1] > 0:
-                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive")
+            if not 0 < jt[col] <= MAX_FILE_VALUE:
+                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive and at most "
+                           f"{MAX_FILE_VALUE:g}")
         if cols["weight"][-1] < 0:
             raise fail(f"{key}.weight", f"= {jt['weight']}: must not be negative")
         if not lo <= cols["home"][-1] <= hi:
