@@ -16,9 +16,8 @@ Outputs, for a shot ``path/to/NAME.usda``:
 
 A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
 set file, and whose summary records the same convert options, is skipped (make-style) unless
-``--force``. A shot that fails loses any MCAP and
-summary left from an earlier run, so nothing in OUTDIR looks like a current result when it is
-not.
+``--force``. A shot that fails writes nothing and removes nothing (as ``convert``): an
+earlier result of it stays, and ``batch_report.json`` says that the shot failed this time.
 
 Exit codes (design.md §5): 0 when every shot converted or was skipped; 2 when any failed shot
 was bad input (or the batch itself was: duplicate output names, bad options); 3 when every
@@ -59,7 +58,6 @@ from camtraj.options import (
 from camtraj.outputs import (
     OutputSet,
     refuse_overlaps,
-    remove_earlier_results,
     remove_stale_temps,
 )
 
@@ -527,7 +525,6 @@ def run_batch(
                 exit_code=2,
                 error="ShotFileError",
             )
-            remove_earlier_results(outputs)
             continue
         inputs = [Path(shot), *extra_inputs]
         if not force and _up_to_date(outputs, inputs):
@@ -578,8 +575,6 @@ def run_batch(
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
-                    if result.status == "failed":  # nothing may look like a current result
-                        remove_earlier_results(shot_outputs(*names[i]))
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)
             except KeyboardInterrupt:

@@ -640,7 +640,6 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
             "%s was made by camtraj %s; this is %s", one_line(path.name), made_with, __version__)
     base = path.resolve().parent
     shot, output, summary = (os.path.normpath(base / task[k]) for k in keys)
-    print(f"camtraj {__version__}, task {index}/{len(tasks)}: {shot} -> {output}", flush=True)
     options = replace(
         options,
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
@@ -822,4 +821,5 @@ def run_task_command(ctx: click.Context, manifest: str, index: int) -> None:
     except CamtrajError as exc:
         click.echo(f"ERROR: {exc}", err=True)
         ctx.exit(exc.exit_code)
-    click.echo(f"task {index}: {result.get('status')}, wrote {result.get('output')}")
+    click.echo(f"camtraj {__version__}, task {index}: {result.get('shot')}: "
+               f"{result.get('status')}, wrote {result.get('output')}")

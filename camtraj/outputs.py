@@ -60,7 +60,6 @@ __all__ = [
     "TEMP_MARK",
     "OutputSet",
     "refuse_overlaps",
-    "remove_earlier_results",
     "remove_stale_temps",
     "temp_name",
 ]
@@ -478,20 +477,6 @@ def _identity(path: str | os.PathLike[str]) -> tuple[str, os.stat_result | None]
         return real, os.stat(real)
     except (OSError, ValueError):
         return real, None
-
-
-def remove_earlier_results(paths: Iterable[str | os.PathLike[str]]) -> None:
-    """Remove earlier results at the output paths of a run that failed (``camtraj batch``: a
-    failed shot leaves nothing that looks like a current result).
-
-    Only regular files are removed (a FIFO or device at an output path stays). The caller has
-    checked the paths with :func:`refuse_overlaps`: none is an input of the run.
-    """
-    with interrupts.deferred(raise_pending=False):
-        for path in paths:
-            with contextlib.suppress(OSError):
-                if stat.S_ISREG(os.lstat(path).st_mode):
-                    os.unlink(path)
 
 
 def _fsync_dir(folder: Path) -> None:
