@@ -520,3 +520,53 @@ def test_the_forked_runs_match_real_processes(corpus: dict[str, Result], tmp_pat
         shutil.copytree(r.folder, folder)
         proc = run_cli(*r.case.args, cwd=folder)
         assert (proc.returncode, proc.stderr) == (r.rc, r.stderr), name
+
+
+# --------------------------------------------------------------------------------------------
+# Smaller items
+# --------------------------------------------------------------------------------------------
+
+
+def test_a_set_file_with_a_utf8_bom_reads_like_one_without(tmp_path: Path) -> None:
+    from camtraj.set_file import SetFile
+
+    text = "[search]\nyaw_deg = 30.0\n[collision]\nprims = [\"/World/set\"]\n"
+    plain, bom = tmp_path / "plain.toml", tmp_path / "bom.toml"
+    plain.write_text(text, encoding="utf-8")
+    bom.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    a, b = SetFile.read(plain), SetFile.read(bom)
+    assert (a.yaw_range_deg, a.prims) == (b.yaw_range_deg, b.prims) == ((30.0, 30.0),
+                                                                         ("/World/set",))
+
+
+def test_a_star_in_a_collision_pattern_stays_in_one_path_element(tmp_path: Path) -> None:
+    """``/World/*/wall`` names the walls one level down, not ``/World/a/b/wall``; a matched
+    prim's descendants are obstacles all the same."""
+    from camtraj.collision import read_obstacles
+
+    path = tmp_path / "set.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    for prim in ("/World/a/wall", "/World/a/b/wall", "/World/props/crate/lid"):
+        UsdGeom.Cube.Define(stage, prim)
+    stage.GetRootLayer().Save()
+    found = {o.path for o in read_obstacles(path, ("/World/*/wall",), [1.0])}
+    assert found == {"/World/a/wall"}
+    found = {o.path for o in read_obstacles(path, ("/World/props/*",), [1.0])}
+    assert found == {"/World/props/crate/lid"}
+
+
+def test_an_instanceable_reference_is_checked_at_each_instance(tmp_path: Path) -> None:
+    from camtraj.collision import read_obstacles
+
+    path = tmp_path / "set.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.Cube.Define(stage, "/proto/box")
+    for i, x in enumerate((0.0, 7.0)):
+        ref = UsdGeom.Xform.Define(stage, f"/World/crate{i}")
+        ref.AddTranslateOp().Set(Gf.Vec3d(x, 0.0, 0.0))
+        ref.GetPrim().GetReferences().AddInternalReference("/proto")
+        ref.GetPrim().SetInstanceable(True)
+    stage.GetRootLayer().Save()
+    obstacles = read_obstacles(path, ("/World/*",), [1.0])
+    assert sorted(float(o.poses[0, 0, 3]) for o in obstacles) == [0.0, 7.0]
