@@ -16,9 +16,8 @@ Outputs, for a shot ``path/to/NAME.usda``:
 
 A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
 set file, and whose summary records the same convert options, is skipped (make-style) unless
-``--force``. A shot that fails loses any MCAP and
-summary left from an earlier run, so nothing in OUTDIR looks like a current result when it is
-not.
+``--force``. A shot that fails writes nothing and removes nothing (as ``convert``): an
+earlier result of it stays, and ``batch_report.json`` says that the shot failed this time.
 
 Exit codes (design.md §5): 0 when every shot converted or was skipped; 2 when any failed shot
 was bad input (or the batch itself was: duplicate output names, bad options); 3 when every
@@ -46,6 +45,7 @@ import click
 from camtraj import __version__, jsonsafe
 from camtraj.errors import CamtrajError, InputError
 from camtraj.folders import check_can_make, make_parent
+from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
     ConvertOptions,
     build_options,
@@ -55,7 +55,11 @@ from camtraj.options import (
     rig_layer_flag,
     rig_layer_for,
 )
-from camtraj.outputs import OutputSet, remove_stale_temps
+from camtraj.outputs import (
+    OutputSet,
+    refuse_overlaps,
+    remove_stale_temps,
+)
 
 __all__ = [
     "REPORT_NAME",
@@ -354,11 +358,6 @@ def _convert_one(
         }
     else:
         outcome = {"status": "ok", "summary": summary}
-    if outcome["status"] == "failed":
-        # A failed shot must not leave an older result that looks current.
-        Path(output).unlink(missing_ok=True)
-        Path(summary_path).unlink(missing_ok=True)
-        Path(rig_layer_for(output)).unlink(missing_ok=True)
     outcome["seconds"] = time.perf_counter() - start
     outcome["cpu_seconds"] = time.process_time() - cpu_start
     return outcome
@@ -410,10 +409,19 @@ def start_workers_early() -> None:
         forkserver.ensure_running()
 
 
+def _unreadable(shot: str) -> str | None:
+    """Why a shot cannot be read at all (missing, a FIFO, a folder), else None."""
+    try:
+        require_regular_file(shot, "shot", InputError)
+    except InputError as exc:
+        return str(exc)
+    return None if os.path.exists(shot) else "no such file"
+
+
 def _read_summary(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_text(path, "summary", InputError))
+    except (InputError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}
 
@@ -483,6 +491,19 @@ def run_batch(
     if jobs < 1:
         msg = f"jobs must be at least 1, got {jobs}"
         raise InputError(msg)
+
+    def shot_outputs(mcap: Path, summary: Path) -> list[Path]:
+        return [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
+
+    # The workers' outputs are checked here, all together, before any shot runs: no output
+    # is an input of the batch (a shot, a layer it uses, the robot or set file), no two
+    # outputs are the same file.
+    labels = ("-o", "--summary", "--usd")
+    planned = [(p, f"{label} {one_line(p)}") for pair in names
+               for p, label in zip(shot_outputs(*pair), labels, strict=False)]
+    refuse_overlaps([*planned, (out / REPORT_NAME, str(out / REPORT_NAME))],
+                    files_read(shots, options))
+
     check_can_make(out / REPORT_NAME, "-o")
     make_parent(out / REPORT_NAME, "-o")
     remove_stale_temps(out)
@@ -492,22 +513,20 @@ def run_batch(
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
     for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):
-        if not Path(shot).is_file():
+        outputs = shot_outputs(mcap, summary)
+        reason = _unreadable(shot)
+        if reason is not None:
             results[i] = ShotResult(
                 shot,
                 str(mcap),
                 str(summary),
                 status="failed",
-                reason="no such file",
+                reason=reason,
                 exit_code=2,
                 error="ShotFileError",
             )
-            Path(mcap).unlink(missing_ok=True)
-            Path(summary).unlink(missing_ok=True)
-            rig_layer_for(mcap).unlink(missing_ok=True)
             continue
         inputs = [Path(shot), *extra_inputs]
-        outputs = [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
         if not force and _up_to_date(outputs, inputs):
             previous = _read_summary(summary)
             if previous.get(OPTIONS_KEY) == wanted:

@@ -325,10 +325,10 @@ def info(mcap_file: str, as_json: bool) -> None:
 def report_command(mcap_file: str, output: str) -> None:
     """Write the HTML report of a converted take (MCAP_FILE): one self-contained page with
     the summary, every axis's use of its limits over take time, and top and side views."""
-    from camtraj.report import report_from_mcap, write_report
+    from camtraj.report import report_mcap
 
     try:
-        write_report(output, report_from_mcap(mcap_file), source=mcap_file)
+        report_mcap(mcap_file, output)
     except CamtrajError as exc:
         _fail(exc)
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -115,13 +116,16 @@ def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...],
     prims = list(stage.Traverse())
     chosen: dict[str, Any] = {}
     for pattern in patterns:
-        matched = [p for p in prims if fnmatch.fnmatchcase(str(p.GetPath()), pattern)]
+        rule = _pattern(pattern)
+        matched = [p for p in prims if rule.fullmatch(str(p.GetPath()))]
         if not matched:
             msg = f"{stage_path}: collision prims {pattern!r} matches no prim on the stage"
             raise InputError(msg)
         for top in matched:
-            found = [p for p in Usd.PrimRange(top) if p.IsA(UsdGeom.Mesh) or
-                     str(p.GetTypeName()) in GPRIMS]
+            _refuse_point_instancers(stage_path, top, Usd, UsdGeom)
+            # instance proxies: the geometry of instanceable references, each at its own pose
+            found = [p for p in Usd.PrimRange(top, Usd.TraverseInstanceProxies())
+                     if p.IsA(UsdGeom.Mesh) or str(p.GetTypeName()) in GPRIMS]
             if not found:
                 msg = (f"{stage_path}: collision prim {top.GetPath()} holds no mesh or gprim "
                        f"({', '.join(('Mesh', *GPRIMS))})")
@@ -136,8 +140,48 @@ def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...],
         for i, tc in enumerate(times):
             cache.SetTime(Usd.TimeCode(float(tc)))
             mats[i] = convert @ np.asarray(cache.GetLocalToWorldTransform(prim)).T
+        bad = np.flatnonzero(~np.all(np.isfinite(mats), axis=(1, 2)))
+        if bad.size:
+            msg = (f"collision prim {path}: its transform is not finite (NaN or inf) at time "
+                   f"code {float(times[bad[0]]):g}")
+            raise InputError(msg)
         out.append(_obstacle(path, prim, times, mats, UsdGeom))
     return out
+
+
+def _refuse_point_instancers(stage_path: str | Path, top: Any, Usd: Any, UsdGeom: Any) -> None:
+    """A PointInstancer's instances are not obstacles camtraj checks: refuse rather than check
+    only its prototypes at their own poses."""
+    p = top
+    while p and not p.IsPseudoRoot():
+        if p.IsA(UsdGeom.PointInstancer):
+            break
+        p = p.GetParent()
+    else:
+        p = next((q for q in Usd.PrimRange(top, Usd.TraverseInstanceProxies())
+                  if q.IsA(UsdGeom.PointInstancer)), None)
+    if p:
+        msg = (f"{stage_path}: collision prim {top.GetPath()} uses the PointInstancer "
+               f"{p.GetPath()}, whose instances camtraj does not check; name real (not "
+               "point-instanced) geometry in [collision] prims")
+        raise InputError(msg)
+
+
+def _pattern(pattern: str) -> re.Pattern[str]:
+    """A prim path pattern as a regex: ``*`` and ``?`` stay within one path element (as in a
+    shell path; a matched prim's descendants are obstacles anyway), ``[...]`` as in fnmatch."""
+    parts = re.split(r"(\*|\?|\[[^\]/]*\])", pattern)
+    out = []
+    for part in parts:
+        if part == "*":
+            out.append("[^/]*")
+        elif part == "?":
+            out.append("[^/]")
+        elif part.startswith("[") and part.endswith("]") and len(part) > 2:
+            out.append(fnmatch.translate(part).removeprefix("(?s:").removesuffix(")\\Z"))
+        else:
+            out.append(re.escape(part))
+    return re.compile("".join(out))
 
 
 def _might_move(prim: Any, UsdGeom: Any) -> bool:
@@ -183,7 +227,11 @@ def _obstacle(path: str, prim: Any, times: Array, mats: Array, UsdGeom: Any) -> 
 
     def attr(name: str, default: float) -> float:
         value = prim.GetAttribute(name).Get(t0)
-        return float(default if value is None else value)
+        value = float(default if value is None else value)
+        if not (math.isfinite(value) and value > 0.0):
+            msg = f"collision prim {path}: {name} = {value:g} must be a positive number"
+            raise InputError(msg)
+        return value
 
     shape, size = "", cast(tuple[float, ...], ())
     if kind == "Cube" and diagonal:
@@ -200,12 +248,10 @@ def _obstacle(path: str, prim: Any, times: Array, mats: Array, UsdGeom: Any) -> 
                         np.zeros(3), _bounding_radius(shape, size))
     if kind == "Mesh":
         mesh = UsdGeom.Mesh(prim)
-        points = np.asarray(mesh.GetPointsAttr().Get(t0), dtype=float).reshape(-1, 3)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(t0), dtype=np.int64)
-        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(t0), dtype=np.int64)
-        if points.shape[0] < 3 or counts.sum() != indices.size:
-            msg = f"collision prim {path}: a mesh without points or with bad face indices"
-            raise InputError(msg)
+        points = np.asarray(mesh.GetPointsAttr().Get(t0) or [], dtype=float).reshape(-1, 3)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(t0) or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(t0) or [], dtype=np.int64)
+        _check_mesh(path, points, counts, indices, float(s[0, 0]))
         verts = points @ scale.T
         tris = _triangulate(counts, indices)
         shape = "convex" if _is_convex(verts, tris) else "mesh"
@@ -215,6 +261,45 @@ def _obstacle(path: str, prim: Any, times: Array, mats: Array, UsdGeom: Any) -> 
     centre = 0.5 * (verts.min(axis=0) + verts.max(axis=0))
     radius = float(np.linalg.norm(verts - centre, axis=1).max())
     return Obstacle(path, shape, (), verts, tris, times, poses, centre, radius)
+
+
+MAX_EXTENT_M = 1.0e6
+"""Farthest a collision vertex may be from its prim's origin [m] (as the camera's limit)."""
+
+
+def _check_mesh(path: str, points: Array, counts: NDArray[np.int64],
+                indices: NDArray[np.int64], scale: float) -> None:
+    """Refuse (InputError, naming the prim and the element) a mesh camtraj cannot check:
+    a point that is not finite or absurdly far, a face of fewer than 3 vertices, an index
+    that names no point, face counts that do not add up to the indices, no faces."""
+    where = f"collision prim {path}"
+    bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+    if bad.size:
+        msg = f"{where}: point {int(bad[0])} is not finite ({points[bad[0]].tolist()})"
+        raise InputError(msg)
+    far = np.flatnonzero(np.abs(points).max(axis=1) * scale > MAX_EXTENT_M) if points.size \
+        else np.zeros(0, dtype=np.int64)
+    if far.size:
+        msg = (f"{where}: point {int(far[0])} is more than {MAX_EXTENT_M:g} m from the "
+               "prim's origin; check the stage units")
+        raise InputError(msg)
+    if counts.size == 0:
+        msg = f"{where}: the mesh has no faces"
+        raise InputError(msg)
+    small = np.flatnonzero(counts < 3)
+    if small.size:
+        msg = (f"{where}: face {int(small[0])} has {int(counts[small[0]])} vertices; "
+               "every face needs at least 3")
+        raise InputError(msg)
+    if int(counts.sum()) != indices.size:
+        msg = (f"{where}: the face vertex counts add up to {int(counts.sum())} but there are "
+               f"{indices.size} face vertex indices")
+        raise InputError(msg)
+    wrong = np.flatnonzero((indices < 0) | (indices >= points.shape[0]))
+    if wrong.size:
+        msg = (f"{where}: face vertex index {int(indices[wrong[0]])} (entry {int(wrong[0])}) "
+               f"names no point; the mesh has {points.shape[0]} points")
+        raise InputError(msg)
 
 
 def _bounding_radius(shape: str, size: tuple[float, ...]) -> float:

@@ -102,6 +102,25 @@ def check_shot(shot: Shot) -> None:
         raise ShotFileError(msg)
 
 
+def load_shot(shot_path: str | Path, options: ConvertOptions) -> Shot:
+    """Read the shot as ``convert`` and ``place`` both take it: checked, at least 2 frames.
+
+    Raises:
+        InputError: Unreadable shot, absurd rate or distances, fewer than 2 frames.
+    """
+    try:
+        shot = read_shot(shot_path, camera=options.camera, frames=options.frames,
+                         focal_length_unit=options.focal_length_unit)
+    except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
+        msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
+        raise ShotFileError(msg) from None
+    check_shot(shot)
+    if shot.frames.shape[0] < 2:
+        msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
+        raise InputError(msg)
+    return shot
+
+
 def load_robot(options: ConvertOptions) -> Robot:
     return Robot.default() if options.robot is None else Robot.from_toml(options.robot)
 
@@ -163,16 +182,7 @@ def analyse(
         start = (None if options.start_from is None
                  else robot.joint_vector(options.start_from, "--start-from"))
         placement = load_placement(options)
-        try:
-            shot = read_shot(shot_path, camera=options.camera, frames=options.frames,
-                             focal_length_unit=options.focal_length_unit)
-        except UnicodeDecodeError:  # USD passes the file's bytes on in its messages
-            msg = f"{shot_path}: not a readable USD file: it holds bytes that are not text"
-            raise ShotFileError(msg) from None
-        check_shot(shot)
-        if shot.frames.shape[0] < 2:
-            msg = f"{shot_path}: the shot has {shot.frames.shape[0]} frame(s); need at least 2"
-            raise InputError(msg)
+        shot = load_shot(shot_path, options)
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:

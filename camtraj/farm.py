@@ -47,10 +47,11 @@ The farm formats need the ``farm`` extra: ``pip install '.[farm]'`` in a camtraj
 from __future__ import annotations
 
 import json
+import logging
+import math
 import os
 import re
 import shlex
-import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -59,9 +60,10 @@ from xml.etree import ElementTree as ET
 
 import click
 
-from camtraj import __version__
-from camtraj.batch import output_names, write_json_atomic, write_text_atomic
+from camtraj import __version__, jsonsafe
+from camtraj.batch import output_names
 from camtraj.errors import CamtrajError, InputError
+from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
     FOCAL_LENGTH_UNITS,
     OBJECTIVES,
@@ -76,6 +78,7 @@ from camtraj.options import (
     rig_layer_flag,
     rig_layer_for,
 )
+from camtraj.outputs import OutputSet, refuse_overlaps
 
 __all__ = [
     "FARM_EXTRA_MESSAGE",
@@ -178,9 +181,23 @@ def _check_shots(shots: Sequence[str]) -> None:
         msg = "no shots given"
         raise InputError(msg)
     for shot in shots:
+        require_regular_file(shot, "shot", InputError)
         if not Path(shot).is_file():
-            msg = f"{shot}: no such shot file"
+            msg = f"{one_line(shot)}: no such shot file"
             raise InputError(msg)
+
+
+def _check_job(shots: Sequence[str], outputs: OutputSet, *, outdir: Path,
+               options: ConvertOptions, rig_layers: bool) -> None:
+    """The job's files and every task's outputs, checked as convert checks its outputs: none
+    is an input of the job (a shot, a layer it uses, the robot or set file), no two coincide."""
+    inputs = files_read(shots, options)
+    outputs.refuse_inputs(inputs)
+    planned = [(p, f"{label} {one_line(p)}") for m, j in output_names(shots, outdir)
+               for p, label in ((m, "the task output"), (j, "the task summary"),
+                                *([(rig_layer_for(m), "the task rig layer")] if rig_layers
+                                  else []))]
+    refuse_overlaps([*((p, f"-o {one_line(p)}") for p in outputs.paths), *planned], inputs)
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,7 +282,7 @@ def openjd_template(
             "allowedValues": list(TIMING_MODES),
             "default": options.timing,
             "description": "shot: keep the shot's timing; scale: slow it to fit the limits; "
-            "optimal: retime optimally.",
+            "optimal: retime time-optimally under velocity, acceleration and jerk limits.",
         }
     )
     params.append(
@@ -410,6 +427,18 @@ def export_openjd(
     _check_shots(shots)
     path = Path(job_file)
     out = Path(outdir) if outdir is not None else path.resolve().parent
+    with OutputSet() as outputs:
+        outputs.add(path, "-o")
+        _check_job(shots, outputs, outdir=out, options=options, rig_layers=rig_layers)
+        outputs.write_bytes(path, _openjd_text(shots, path, out, options, relative=relative,
+                                               executable=executable, name=name,
+                                               rig_layers=rig_layers).encode("utf-8"))
+        outputs.commit()
+    return path
+
+
+def _openjd_text(shots: Sequence[str], path: Path, out: Path, options: ConvertOptions, *,
+                 relative: bool, executable: str, name: str | None, rig_layers: bool) -> str:
     template = openjd_template(
         shots,
         path,
@@ -433,8 +462,7 @@ def export_openjd(
         text = header + yaml.safe_dump(
             template, sort_keys=False, allow_unicode=True, default_flow_style=False, width=1000
         )
-    write_text_atomic(path, text)
-    return path
+    return text
 
 
 # --------------------------------------------------------------------------------------------
@@ -489,15 +517,34 @@ def export_opencue(
     """
     _require("outline", "opencue-pyoutline")
     _check_shots(shots)
+    path = Path(job_file)
+    manifest = manifest_path_for(path)
+    out = Path(outdir) if outdir is not None else path.resolve().parent
+    with OutputSet() as outputs:
+        outputs.add(manifest, "the task manifest")
+        outputs.add(path, "-o")
+        _check_job(shots, outputs, outdir=out, options=options, rig_layers=rig_layers)
+        manifest_data, text = _opencue_files(shots, path, manifest, out, options,
+                                             relative=relative, executable=executable,
+                                             name=name, show=show, shot=shot,
+                                             rig_layers=rig_layers)
+        outputs.write_bytes(manifest, (jsonsafe.dumps(manifest_data) + "\n").encode("utf-8"))
+        outputs.write_bytes(path, text.encode("utf-8"))
+        outputs.commit()
+    return path, manifest
+
+
+def _opencue_files(shots: Sequence[str], path: Path, manifest: Path, out: Path,
+                   options: ConvertOptions, *, relative: bool, executable: str,
+                   name: str | None, show: str | None, shot: str | None,
+                   rig_layers: bool) -> tuple[dict[str, Any], str]:
+    """The manifest (as data) and the spec XML (as text) of an OpenCue job."""
     import outline
     import outline.backend.cue
     import outline.cuerun
     from outline.modules.shell import Shell
 
-    path = Path(job_file)
-    manifest = manifest_path_for(path)
     spell = _Paths(path, relative=relative)
-    out = Path(outdir) if outdir is not None else path.resolve().parent
     names = output_names(shots, out)
 
     portable = _portable(options, spell)
@@ -541,9 +588,7 @@ def export_opencue(
         f"<!-- OpenCue job spec made by camtraj {__version__}: frame N converts shot N "
         f"of {manifest.name} -->\n" + ET.tostring(root, encoding="unicode") + "\n"
     )
-    write_json_atomic(manifest, manifest_data)
-    write_text_atomic(path, text)
-    return path, manifest
+    return manifest_data, text
 
 
 def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
@@ -565,47 +610,93 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
     job_dir = os.environ.get(JOB_DIR_ENV)
     if not path.is_absolute() and job_dir:
         path = Path(job_dir) / path
+    where = f"task manifest {one_line(path)}"
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        msg = f"{path}: cannot read the task manifest: {exc}"
-        raise InputError(msg) from exc
+        data = json.loads(read_text(path, "task manifest", InputError))
+    except ValueError as exc:
+        msg = f"{where}: not JSON ({exc})"
+        raise InputError(msg) from None
     if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT:
-        msg = f"{path}: not a camtraj task manifest (format {MANIFEST_FORMAT})"
+        msg = f"{where}: not a camtraj task manifest (format {MANIFEST_FORMAT})"
         raise InputError(msg)
-    tasks = data["tasks"]
+    tasks = data.get("tasks")
+    if not isinstance(tasks, list) or not tasks:
+        msg = f"{where}: \"tasks\" must be a non-empty list"
+        raise InputError(msg)
     if not 1 <= index <= len(tasks):
-        msg = f"{path}: task {index} does not exist; the manifest has tasks 1-{len(tasks)}"
+        msg = f"{where}: task {index} does not exist; the manifest has tasks 1-{len(tasks)}"
         raise InputError(msg)
-    made_with = data.get("camtraj_version")
-    if made_with != __version__:
-        print(
-            f"WARNING: {path.name} was made by camtraj {made_with}; this is {__version__}",
-            file=sys.stderr,
-        )
-    base = path.resolve().parent
     task = tasks[index - 1]
-    shot, output, summary = (
-        os.path.normpath(base / task[k]) for k in ("shot", "output", "summary")
-    )
-    print(f"camtraj {__version__}, task {index}/{len(tasks)}: {shot} -> {output}", flush=True)
-    options = options_from_json(data["options"])
+    keys = ("shot", "output", "summary")
+    if not isinstance(task, dict) or not all(_is_path(task.get(k)) for k in keys) or (
+            task.get("rig_layer") is not None and not _is_path(task["rig_layer"])):
+        msg = (f"{where}: task {index} must name its shot, output and summary (and optional "
+               "rig_layer) as non-empty path strings")
+        raise InputError(msg)
+    options = _manifest_options(data.get("options"), where)
+    made_with = data.get("camtraj_version")
+    if made_with != __version__:  # held: shown when the task succeeds (a failure is one line)
+        logging.getLogger("camtraj").warning(
+            "%s was made by camtraj %s; this is %s", one_line(path.name), made_with, __version__)
+    base = path.resolve().parent
+    shot, output, summary = (os.path.normpath(base / task[k]) for k in keys)
     options = replace(
         options,
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
     )
     rig = os.path.normpath(base / task["rig_layer"]) if task.get("rig_layer") else None
-    try:  # the MCAP, the summary and the rig layer are one result (all written or none)
-        result: dict[str, Any] = convert(shot, output, options, summary_path=summary,
-                                         rig_layer=rig)
-    except CamtrajError:
-        Path(output).unlink(missing_ok=True)
-        Path(summary).unlink(missing_ok=True)
-        if rig is not None:
-            Path(rig).unlink(missing_ok=True)
-        raise
+    # the MCAP, the summary and the rig layer are one result: all written or none (a failed
+    # task leaves every file as it was)
+    result: dict[str, Any] = convert(shot, output, options, summary_path=summary, rig_layer=rig)
     return result
+
+
+def _is_path(value: Any) -> bool:
+    return isinstance(value, str) and bool(value) and "\0" not in value
+
+
+_OPTION_TYPES: dict[str, tuple[str, int]] = {
+    # field: (kind, count): "str", "path", "number", or "numbers"/"ints" with a count
+    "camera": ("str", 0), "robot": ("path", 0), "set_file": ("path", 0),
+    "placement": ("numbers", 4), "frames": ("ints", 2), "rate": ("number", 0),
+    "timing": ("str", 0), "start_from": ("numbers", 8), "objective": ("str", 0),
+    "focal_length_unit": ("str", 0), "clearance": ("number", 0),
+}
+
+
+def _manifest_options(data: Any, where: str) -> ConvertOptions:
+    """The manifest's convert options, each checked for its type before use."""
+    if not isinstance(data, dict):
+        msg = f"{where}: \"options\" must be a table of convert options"
+        raise InputError(msg)
+    for key, value in data.items():
+        kind, count = _OPTION_TYPES.get(key, ("", 0))
+        if value is None or not kind:
+            continue  # an unknown option is named by options_from_json
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        ok = {
+            "str": isinstance(value, str),
+            "path": _is_path(value),
+            "number": number and math.isfinite(value),
+            "numbers": isinstance(value, list) and len(value) == count and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value),
+            "ints": isinstance(value, list) and len(value) == count and all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value),
+        }[kind]
+        if not ok:
+            msg = f"{where}: option {key} = {json.dumps(value)[:60]} is not a valid value"
+            raise InputError(msg)
+    frames = data.get("frames")
+    if frames is not None and frames[0] > frames[1]:
+        msg = f"{where}: option frames = {frames} ends before it starts"
+        raise InputError(msg)
+    try:
+        return options_from_json(data)
+    except InputError as exc:
+        msg = f"{where}: {exc}"
+        raise InputError(msg) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -730,4 +821,5 @@ def run_task_command(ctx: click.Context, manifest: str, index: int) -> None:
     except CamtrajError as exc:
         click.echo(f"ERROR: {exc}", err=True)
         ctx.exit(exc.exit_code)
-    click.echo(f"task {index}: {result.get('status')}, wrote {result.get('output')}")
+    click.echo(f"camtraj {__version__}, task {index}: {result.get('shot')}: "
+               f"{result.get('status')}, wrote {result.get('output')}")

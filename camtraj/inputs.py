@@ -1,22 +1,35 @@
-"""The files a run reads: the shot and the USD layers it uses, the robot file, the set file.
+"""The files a run reads: the shot and the USD layers it uses, the robot file, the set file,
+an MCAP, a task manifest.
 
-Two checks use them before any work is done: every input must be a regular file (a named
-pipe would block the read forever, a device would be read without end), and no output may be
-one of them (:meth:`camtraj.outputs.OutputSet.refuse_inputs`).
+Every command reads its inputs through this module, so two checks hold for all of them
+before any work is done: every input must be a regular file (a named pipe would block the read
+forever, a device would be read without end), and no output may be one of them
+(:meth:`camtraj.outputs.OutputSet.refuse_inputs`, given :func:`files_read`). Small text inputs
+(robot, set and manifest files) are read whole by :func:`read_text`: UTF-8, a BOM allowed.
 """
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import os
 import stat
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from camtraj.errors import InputError, RobotFileError, ShotFileError
 from camtraj.options import ConvertOptions
 
-__all__ = ["require_regular_files", "run_inputs", "shot_layers"]
+__all__ = [
+    "files_read",
+    "one_line",
+    "read_text",
+    "require_regular_file",
+    "require_regular_files",
+    "run_inputs",
+    "shot_layers",
+]
 
 _KIND = {
     stat.S_IFDIR: "a folder",
@@ -25,6 +38,18 @@ _KIND = {
     stat.S_IFIFO: "a named pipe (FIFO)",
     stat.S_IFSOCK: "a socket",
 }
+
+MAX_TEXT_BYTES = 64 * 1024 * 1024
+"""Largest robot, set or manifest file read [bytes]; more is not a hand-written file."""
+
+
+def one_line(path: str | os.PathLike[str]) -> str:
+    """A path as printed in a one-line message: a newline or other control character in a
+    file name is shown escaped, so the message stays one line."""
+    text = os.fsdecode(path)
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def require_regular_file(path: str | os.PathLike[str], what: str, error: type[InputError]) -> None:
@@ -38,8 +63,61 @@ def require_regular_file(path: str | os.PathLike[str], what: str, error: type[In
         return
     if not stat.S_ISREG(mode):
         kind = _KIND.get(stat.S_IFMT(mode), "not a regular file")
-        msg = f"{os.fsdecode(path)}: the {what} is {kind}, not a regular file"
+        msg = f"{one_line(path)}: the {what} is {kind}, not a regular file"
         raise error(msg)
+
+
+def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) -> str:
+    """The whole text of a small UTF-8 input file (a BOM is allowed and dropped).
+
+    Args:
+        path: The file.
+        what: What it is, for messages (``"robot file"``, ``"set file"``).
+        error: The error class raised.
+
+    Raises:
+        error: Missing, not a regular file, too large, UTF-16/32 or not UTF-8, or NUL bytes;
+            one line naming the file.
+    """
+    where = f"{what} {one_line(path)}"
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        msg = f"{where}: cannot read it ({reason})"
+        raise error(msg) from None
+    try:  # O_NONBLOCK: opening a FIFO does not wait for a writer
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = _KIND.get(stat.S_IFMT(st.st_mode), "not a regular file")
+            msg = f"{where}: cannot read it: it is {kind}, not a regular file"
+            raise error(msg)
+        if st.st_size > MAX_TEXT_BYTES:
+            msg = f"{where}: {st.st_size} bytes is too large for a {what}"
+            raise error(msg)
+        with os.fdopen(os.dup(fd), "rb") as stream:
+            data = stream.read()
+    except OSError as exc:
+        msg = f"{where}: cannot read it ({exc.strerror or exc})"
+        raise error(msg) from None
+    finally:
+        os.close(fd)
+    for bom, name in ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
+                      (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16")):
+        if data.startswith(bom):
+            msg = f"{where}: the file is {name} text; save it as UTF-8"
+            raise error(msg)
+    try:
+        text = data.decode("utf-8-sig")  # a BOM (Windows editors) is fine
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        msg = (f"{where}: not UTF-8 text (byte 0x{data[exc.start]:02x} on line {line}); "
+               f"a {what} is UTF-8 text")
+        raise error(msg) from None
+    if "\0" in text:
+        msg = f"{where}: holds NUL bytes: a binary or UTF-16 file, not UTF-8 text"
+        raise error(msg)
+    return text
 
 
 def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions) -> None:
@@ -56,7 +134,7 @@ def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions)
     require_regular_file(shot, "shot", ShotFileError)
     if options.robot is not None:
         require_regular_file(options.robot, "robot file", RobotFileError)
-    if options.set_file is not None and options.placement is None:
+    if options.set_file is not None:
         require_regular_file(options.set_file, "set file", InputError)
 
 
@@ -82,14 +160,24 @@ def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
     return [Path(p) for p in dict.fromkeys(found) if p and os.path.realpath(p) != root]
 
 
-def run_inputs(shot: str | os.PathLike[str], options: ConvertOptions) -> list[tuple[Path, str]]:
-    """(path, description) of every file a convert run reads, for the output checks."""
-    name = Path(os.fsdecode(shot)).name
-    inputs = [(Path(os.fsdecode(shot)), "the shot")]
-    if os.path.isfile(shot):
-        inputs += [(p, f"a layer used by the shot {name}") for p in shot_layers(shot)]
+def files_read(shots: Sequence[str | os.PathLike[str]],
+               options: ConvertOptions) -> list[tuple[Path, str]]:
+    """(path, description) of every file a run over ``shots`` reads, for the output checks:
+    each shot and the USD layers it uses, the robot file, the set file."""
+    inputs: list[tuple[Path, str]] = []
+    for shot in shots:
+        name = Path(os.fsdecode(shot)).name
+        inputs.append((Path(os.fsdecode(shot)), "the shot" if len(shots) == 1
+                       else f"the shot {name}"))
+        if os.path.isfile(shot):
+            inputs += [(p, f"a layer used by the shot {name}") for p in shot_layers(shot)]
     if options.robot is not None:
         inputs.append((Path(options.robot), "the robot file"))
     if options.set_file is not None:
         inputs.append((Path(options.set_file), "the set file"))
     return inputs
+
+
+def run_inputs(shot: str | os.PathLike[str], options: ConvertOptions) -> list[tuple[Path, str]]:
+    """(path, description) of every file a run over one shot reads (:func:`files_read`)."""
+    return files_read([shot], options)

@@ -38,6 +38,7 @@ from typing import IO, Any
 
 import numpy as np
 from mcap.reader import make_reader
+from mcap.stream_reader import CRCValidationError
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
@@ -1003,6 +1004,10 @@ def _guard(path: Path, action: Callable[[], Any]) -> Any:
     except OSError as exc:
         msg = f"cannot read {path}: {_reason(exc)}"
         raise InputError(msg) from exc
+    except CRCValidationError as exc:
+        msg = (f"{path}: the file is damaged: a checksum (CRC) does not match its data "
+               f"({exc}); convert the shot again")
+        raise InputError(msg) from exc
     except Exception as exc:
         msg = f"{path}: not a readable MCAP file ({type(exc).__name__}: {exc})"
         raise InputError(msg) from exc
@@ -1025,7 +1030,7 @@ def read_take(path: str | Path) -> ReadTake:
 
 
 def _read(path: Path, stream: IO[bytes]) -> ReadTake:
-    reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+    reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
     header = reader.get_header()
     summary = reader.get_summary()
     if summary is None:
@@ -1156,7 +1161,7 @@ def describe(path: str | Path) -> dict[str, Any]:
 
 
 def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
-    reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+    reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
     header = reader.get_header()
     summary = reader.get_summary()
     if summary is None or summary.statistics is None:

@@ -36,7 +36,8 @@ class ConvertOptions:
         set_file: A TOML file with a ``[placement]`` table (used when ``placement`` is None).
         frames: Inclusive film frame range (first, last); default the stage's range.
         rate: Requested servo rate [Hz].
-        timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"``.
+        timing: ``"shot"`` (keep the film's timing), ``"scale"`` or ``"optimal"`` (jerk-limited
+            time-optimal retime).
         start_from: Joint vector (8,) [m, rad] the robot starts from; default its home.
         objective: IK objective override (``"shot"`` or ``"paper"``).
         focal_length_unit: ``"schema"`` (USD's tenths of a scene unit) or ``"mm"`` (what some
@@ -181,7 +182,8 @@ def convert_options(func: F) -> F:
             type=click.Choice(TIMING_MODES),
             default="shot",
             show_default=True,
-            help="Keep the shot's timing, scale it to fit the limits, or retime optimally.",
+            help="Keep the shot's timing, scale it to fit the limits, or retime it "
+            "time-optimally under velocity, acceleration and jerk limits.",
         ),
     ]
     for decorator in reversed(decorators):

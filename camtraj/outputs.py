@@ -54,8 +54,15 @@ from typing import BinaryIO
 from camtraj import interrupts
 from camtraj.errors import InputError
 from camtraj.folders import check_can_make, make_parent
+from camtraj.inputs import one_line
 
-__all__ = ["TEMP_MARK", "OutputSet", "remove_stale_temps", "temp_name"]
+__all__ = [
+    "TEMP_MARK",
+    "OutputSet",
+    "refuse_overlaps",
+    "remove_stale_temps",
+    "temp_name",
+]
 
 TEMP_MARK = ".camtraj-tmp-"
 """Part of the name of every temporary file camtraj creates next to an output."""
@@ -146,7 +153,8 @@ class _Output:
 
     @property
     def what(self) -> str:
-        return f"{self.label} {self.given}" if self.label else self.given
+        given = one_line(self.given)
+        return f"{self.label} {given}" if self.label else given
 
 
 class OutputSet:
@@ -191,23 +199,7 @@ class OutputSet:
         Args:
             inputs: (path, description) pairs, e.g. ``("shot.usda", "the shot")``.
         """
-        for path, description in inputs:
-            try:
-                st = os.stat(path)
-            except (OSError, ValueError):
-                continue
-            real = os.path.realpath(path)
-            for out in self._outputs:
-                try:
-                    same = Path(real) == out.target or _same_file(st, os.stat(out.target))
-                except OSError:
-                    same = False
-                if same:
-                    msg = (
-                        f"refusing to write {out.what}: it is {description} "
-                        f"({os.fsdecode(path)}); choose another output file"
-                    )
-                    raise InputError(msg)
+        refuse_overlaps([(o.target, o.what) for o in self._outputs], inputs)
 
     @property
     def paths(self) -> list[Path]:
@@ -441,6 +433,50 @@ class OutputSet:
         tb: TracebackType | None,
     ) -> None:
         self.discard()
+
+
+def refuse_overlaps(outputs: Iterable[tuple[str | os.PathLike[str], str]],
+                    inputs: Iterable[tuple[str | os.PathLike[str], str]] = ()) -> None:
+    """Refuse (InputError) an output that is one of ``inputs`` or another of ``outputs``.
+
+    The rule :class:`OutputSet` applies to the files it writes, for outputs that other
+    processes write later (a batch's workers, a farm job's tasks): paths are compared through
+    symlinks, ``..`` and hard links.
+
+    Args:
+        outputs: (path, how the user named it) pairs, e.g. ``("out/a.mcap", "-o out/a.mcap")``.
+        inputs: (path, description) pairs, e.g. ``("shot.usda", "the shot")``.
+    """
+    seen: list[tuple[str, os.stat_result | None, str]] = []
+    for path, what in outputs:
+        real, st = _identity(path)
+        for other_real, other_st, other in seen:
+            if real == other_real or (st is not None and other_st is not None
+                                      and _same_file(st, other_st)):
+                msg = f"cannot write {what}: it is the same file as {other}"
+                raise InputError(msg)
+        seen.append((real, st, what))
+    for path, description in inputs:
+        real, st = _identity(path)
+        if st is None:
+            continue
+        for out_real, out_st, what in seen:
+            if real == out_real or (out_st is not None and _same_file(st, out_st)):
+                msg = (f"refusing to write {what}: it is {description} "
+                       f"({one_line(path)}); choose another output file")
+                raise InputError(msg)
+
+
+def _identity(path: str | os.PathLike[str]) -> tuple[str, os.stat_result | None]:
+    """The real path of a file, and its stat when it exists."""
+    try:
+        real = os.path.realpath(path)
+    except (OSError, ValueError):
+        real = os.path.abspath(path)
+    try:
+        return real, os.stat(real)
+    except (OSError, ValueError):
+        return real, None
 
 
 def _fsync_dir(folder: Path) -> None:

@@ -434,7 +434,9 @@ def place(
         PlacementError: No placement passes the cheap tests (exit 3).
     """
     from camtraj.collision import read_obstacles
-    from camtraj.usd_shot import read_shot
+    from camtraj.convert import load_shot
+    from camtraj.inputs import require_regular_files
+    from camtraj.options import ConvertOptions
 
     start = time.perf_counter()
     if jobs is None:
@@ -443,12 +445,13 @@ def place(
     if jobs < 1:
         msg = f"jobs must be at least 1, got {jobs}"
         raise InputError(msg)
+    # the options convert would take: the same checks of the clearance and of every input file
+    options = ConvertOptions(robot=robot, set_file=set_file, camera=camera, frames=frames,
+                             clearance=clearance)
+    require_regular_files(shot_path, options)
     rob = Robot.default() if robot is None else Robot.from_toml(robot)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
-    shot = read_shot(shot_path, camera=camera, frames=frames)
-    if shot.n_frames < 2:
-        msg = f"{shot_path}: the shot has {shot.n_frames} frame(s); need at least 2"
-        raise InputError(msg)
+    shot = load_shot(shot_path, options)
     obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
     base_z = sf.floor_height * shot.meters_per_unit
     problem = Problem(rob, np.array(shot.cam2world), np.array(shot.times),
@@ -523,29 +526,38 @@ def place_command(ctx: click.Context, /, shot: str, robot: str | None, set_file:
     """
     import json
 
-    from camtraj.batch import write_text_atomic
     from camtraj.errors import CamtrajError
-    from camtraj.options import _parse_frames
+    from camtraj.inputs import run_inputs
+    from camtraj.options import ConvertOptions, _parse_frames
+    from camtraj.outputs import OutputSet
     from camtraj.set_file import to_toml
 
-    try:
-        if output is not None and not Path(output).parent.is_dir():
-            msg = f"cannot write -o {output}: folder {Path(output).parent} does not exist"
-            raise InputError(msg)
-        report = place(shot, robot=robot, set_file=set_file, camera=camera,
-                       frames=_parse_frames(frames) if frames else None, clearance=clearance,
-                       jobs=jobs, progress=not quiet and sys.stderr.isatty(), top=top)
-    except CamtrajError as exc:
-        click.echo(f"ERROR: {exc}", err=True)
-        ctx.exit(exc.exit_code)
-    click.echo(json.dumps(report.to_json(), indent=2) if as_json else table(report))
-    best = report.best
-    if not best.ok:
-        click.echo(f"ERROR: no placement can do the shot as asked; the best: {best.reason}",
-                   err=True)
-        ctx.exit(3)
-    if output is not None:
-        write_text_atomic(Path(output), to_toml(best.base2world(report.base_z),
-                                                report.set_file.raw))
-        if not as_json:
-            click.echo(f"  wrote {output}")
+    with OutputSet() as outputs:
+        try:
+            if output is not None:  # checked before the search, like every command's outputs
+                outputs.add(output, "-o")
+                outputs.refuse_inputs(run_inputs(shot, ConvertOptions(robot=robot,
+                                                                      set_file=set_file)))
+            report = place(shot, robot=robot, set_file=set_file, camera=camera,
+                           frames=_parse_frames(frames) if frames else None,
+                           clearance=clearance, jobs=jobs,
+                           progress=not quiet and sys.stderr.isatty(), top=top)
+        except CamtrajError as exc:
+            click.echo(f"ERROR: {exc}", err=True)
+            ctx.exit(exc.exit_code)
+        click.echo(json.dumps(report.to_json(), indent=2) if as_json else table(report))
+        best = report.best
+        if not best.ok:
+            click.echo(f"ERROR: no placement can do the shot as asked; the best: {best.reason}",
+                       err=True)
+            ctx.exit(3)
+        if output is not None:
+            text = to_toml(best.base2world(report.base_z), report.set_file.raw)
+            try:
+                outputs.write_bytes(output, text.encode("utf-8"))
+                outputs.commit()
+            except CamtrajError as exc:
+                click.echo(f"ERROR: {exc}", err=True)
+                ctx.exit(exc.exit_code)
+            if not as_json:
+                click.echo(f"  wrote {output}")

@@ -7,9 +7,7 @@ z up, joints ordered track, rotate, lift, extend, elbow, pan, tilt, roll. Transf
 
 from __future__ import annotations
 
-import codecs
 import math
-import stat
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -20,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import InputError, RobotFileError
+from camtraj.inputs import read_text
 
 Array = NDArray[np.float64]
 
@@ -305,37 +304,14 @@ def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
 # Robot description file
 # ---------------------------------------------------------------------------------------------
 
+MAX_FILE_VALUE = 1.0e6
+"""Largest magnitude of a joint limit in a robot file (m, deg; per s, s², s³): beyond it the
+solver's arithmetic overflows, and no machine comes near it."""
+
+
 def _read_text(path: Path) -> str:
     """The file's text, refusing what is not a regular UTF-8 file (a FIFO would block)."""
-    where = f"robot file {path}"
-    try:
-        st = path.stat()
-        if not stat.S_ISREG(st.st_mode):
-            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-            msg = f"{where}: cannot read it ({kind})"
-            raise RobotFileError(msg)
-        data = path.read_bytes()
-    except OSError as exc:
-        msg = f"{where}: cannot read it ({exc.strerror or exc})"
-        raise RobotFileError(msg) from None
-    for bom, name in ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
-                      (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16")):
-        if data.startswith(bom):
-            msg = f"{where}: the file is {name} text; save it as UTF-8 (TOML files are UTF-8)"
-            raise RobotFileError(msg)
-    try:
-        text = data.decode("utf-8-sig")  # a BOM (Windows editors) is fine
-    except UnicodeDecodeError as exc:
-        line = data[: exc.start].count(b"\n") + 1
-        msg = (
-            f"{where}: not UTF-8 text (byte 0x{data[exc.start]:02x} on line {line}); "
-            "a robot file is UTF-8 TOML"
-        )
-        raise RobotFileError(msg) from None
-    if "\0" in text:
-        msg = f"{where}: holds NUL bytes: a binary or UTF-16 file, not UTF-8 TOML text"
-        raise RobotFileError(msg)
-    return text
+    return read_text(path, "robot file", RobotFileError)
 
 
 _TOP_KEYS = {"robot", "dh", "joints", "mount", "ik", "controller"}
@@ -400,9 +376,12 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         lo, hi = cols["min"][-1], cols["max"][-1]
         if not lo < hi:
             raise fail(f"{key}", f"min ({jt['min']}) must be below max ({jt['max']})")
+        if max(abs(jt["min"]), abs(jt["max"])) > MAX_FILE_VALUE:
+            raise fail(key, f"min and max must lie within ±{MAX_FILE_VALUE:g}")
         for col in ("max_velocity", "max_acceleration", "max_jerk"):
-            if not cols[col][-1] > 0:
-                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive")
+            if not 0 < jt[col] <= MAX_FILE_VALUE:
+                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive and at most "
+                           f"{MAX_FILE_VALUE:g}")
         if cols["weight"][-1] < 0:
             raise fail(f"{key}.weight", f"= {jt['weight']}: must not be negative")
         if not lo <= cols["home"][-1] <= hi:

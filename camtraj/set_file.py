@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.errors import InputError
+from camtraj.inputs import one_line, read_text
 
 Array = NDArray[np.float64]
 
@@ -78,13 +79,7 @@ class SetFile:
 
     @classmethod
     def read(cls, path: str | Path) -> SetFile:
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            msg = f"set file {path}: cannot read it ({exc.strerror or exc})"
-            raise InputError(msg) from exc
-        return cls.parse(text, str(path))
+        return cls.parse(read_text(path, "set file", InputError), one_line(path))
 
     @classmethod
     def parse(cls, text: str, source: str = "<text>") -> SetFile:

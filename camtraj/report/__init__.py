@@ -20,7 +20,7 @@ from camtraj.report.data import (
     pose_indices,
     report_from_mcap,
 )
-from camtraj.report.page import render_html, write_report
+from camtraj.report.page import render_html, report_mcap, write_report
 
 __all__ = [
     "QUANTITIES",
@@ -31,5 +31,6 @@ __all__ = [
     "pose_indices",
     "render_html",
     "report_from_mcap",
+    "report_mcap",
     "write_report",
 ]

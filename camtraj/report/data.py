@@ -35,8 +35,6 @@ IntArray = NDArray[np.int64]
 QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
 #: Above 1 + this fraction of a limit a sample counts as over it (float round-off only).
 LIMIT_RTOL = 1e-9
-#: The same for an "optimal" take: toppra is discretised (timing.OPTIMAL_SLACK).
-OPTIMAL_RTOL = 1e-3
 #: The same for a take read back from MCAP: its jerk is by differences of the recorded
 #: accelerations, which sit on the jerk limit to ~1e-8 in the run-up and run-out.
 MCAP_RTOL = 1e-6
@@ -320,8 +318,7 @@ def from_analysis(
             max_speed=float(take.report.max_speed), t=take.t, q=take.q, qd=take.qd,
             qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
-            tolerance=OPTIMAL_RTOL if take.mode == "optimal" else LIMIT_RTOL,
-            violations=_violations(take.report.exceeded),
+            tolerance=LIMIT_RTOL,
         )
         return data
     empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, 8) for k in ("q", "qd", "qdd",
@@ -427,14 +424,39 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
     if not robot_md or take.frame_numbers.size < 1:
         msg = f"{source}: no robot limits or no shot frames recorded; not a camtraj take?"
         raise InputError(msg)
+    where = f"{source}: the camtraj metadata"
+    n = len(take.trajectory_joint_names)
+    if take.trajectory_q.ndim != 2 or take.trajectory_q.shape[1] != n:
+        msg = f"{source}: /joint_trajectory names {n} joints for its positions"
+        raise InputError(msg)
+    lim = {k: _numbers(robot_md.get(k), n, f"{where} {ROBOT_METADATA_NAME}.{k}")
+           for k in ("lower", "upper", "max_velocity", "max_acceleration", "max_jerk")}
+    if not np.all(lim["lower"] < lim["upper"]):
+        msg = f"{where} {ROBOT_METADATA_NAME}: every lower limit must be below its upper"
+        raise InputError(msg)
+    for k in ("max_velocity", "max_acceleration", "max_jerk"):
+        if not np.all((lim[k] > 0.0) & (lim[k] <= MAX_LIMIT)):
+            msg = (f"{where} {ROBOT_METADATA_NAME}.{k} must be positive and at most "
+                   f"{MAX_LIMIT:g}")
+            raise InputError(msg)
     try:
-        lim = {k: np.asarray(json.loads(robot_md[k]), dtype=float)
-               for k in ("lower", "upper", "max_velocity", "max_acceleration", "max_jerk")}
         placement = json.loads(md.get("placement", "{}"))
-        warnings = tuple(json.loads(md.get("warnings", "[]")))
-    except (KeyError, ValueError) as exc:
-        msg = f"{source}: the camtraj metadata cannot be read ({exc})"
-        raise InputError(msg) from exc
+        warnings = json.loads(md.get("warnings", "[]"))
+    except ValueError as exc:
+        msg = f"{where} cannot be read ({exc})"
+        raise InputError(msg) from None
+    _check_placement(placement, f"{where} placement")
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        msg = f"{where} warnings must be a list of texts"
+        raise InputError(msg)
+    for key in ("fps", "servo_rate_hz", "speed_factor"):
+        value = _float(md.get(key))
+        if not (math.isfinite(value) and value > 0.0):
+            msg = f"{where} {key} = {md.get(key)!r} must be a positive number"
+            raise InputError(msg)
+    if take.tf_times.size == 0:
+        msg = f"{source}: no /tf messages; the report's robot views need them"
+        raise InputError(msg)
     from camtraj.robot import JOINT_KINDS
 
     names = tuple(take.trajectory_joint_names)
@@ -458,10 +480,48 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         frame_numbers=take.frame_numbers, frame_times=take.frame_times,
         shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
-        poses=poses, pose_frames=pose_frames, track=track, warnings=warnings,
-        tolerance=OPTIMAL_RTOL if mode == "optimal" else MCAP_RTOL, source=str(source),
+        poses=poses, pose_frames=pose_frames, track=track, warnings=tuple(warnings),
+        tolerance=MCAP_RTOL, source=str(source),
     )
     return _with_violations(data)
+
+
+MAX_LIMIT = 1.0e6
+"""Largest velocity, acceleration or jerk limit a report takes [m or rad per s^k]."""
+
+
+def _numbers(text: str | None, n: int, where: str) -> Array:
+    """``n`` finite numbers from a JSON list, or InputError naming ``where``."""
+    try:
+        value = json.loads(text) if text is not None else None
+    except ValueError:
+        value = None
+    ok = isinstance(value, list) and len(value) == n and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in value)
+    if not ok:
+        msg = f"{where} must be a list of {n} finite numbers"
+        raise InputError(msg)
+    return np.asarray(value, dtype=float)
+
+
+def _check_placement(desc: Any, where: str) -> None:
+    """The recorded placement: translation_m 3 numbers, rotation 3x3, yaw_deg a number."""
+    def finite(v: Any, shape: tuple[int, ...]) -> bool:
+        try:
+            a = np.asarray(v)
+        except ValueError:  # ragged lists
+            return False
+        return (a.shape == shape and a.dtype.kind in "iuf"
+                and bool(np.all(np.isfinite(a.astype(float)))))
+
+    ok = (isinstance(desc, dict)
+          and finite(desc.get("translation_m", (0.0, 0.0, 0.0)), (3,))
+          and finite(desc.get("rotation", np.eye(3)), (3, 3))
+          and finite(desc.get("yaw_deg", 0.0), ()))
+    if not ok:
+        msg = f"{where} must hold translation_m (3 numbers), rotation (3x3) and yaw_deg"
+        raise InputError(msg)
 
 
 def _float(text: str | None) -> float:
@@ -504,6 +564,8 @@ def _tf_poses(take: ReadTake, lower: float, upper: float) -> tuple[Array, IntArr
 
 def report_from_mcap(path: str | Path) -> ReportData:
     """Read a camtraj MCAP and build its report data (``camtraj report``)."""
+    from camtraj.inputs import require_regular_file
     from camtraj.mcap_io import read_take
 
+    require_regular_file(path, "MCAP file", InputError)  # a FIFO would block the read
     return from_take(read_take(path), path)

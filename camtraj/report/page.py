@@ -221,3 +221,24 @@ def write_report(path: str | Path, data: ReportData, *, source: str | Path | Non
             outputs.refuse_inputs([(source, "the MCAP the report is made from")])
         outputs.write_bytes(path, render_html(data).encode("utf-8"))
         outputs.commit()
+
+
+def report_mcap(mcap: str | Path, path: str | Path) -> None:
+    """``camtraj report``: the report of a converted take (``mcap``) written to ``path``.
+
+    The output is checked (not the MCAP, a writable folder, a regular file or nothing) before
+    the MCAP is read.
+
+    Raises:
+        InputError: The output cannot be written, or the MCAP cannot be read or is not a
+            camtraj take.
+    """
+    from camtraj.outputs import OutputSet
+    from camtraj.report.data import report_from_mcap
+
+    with OutputSet() as outputs:
+        outputs.add(path, "-o")
+        outputs.refuse_inputs([(mcap, "the MCAP the report is made from")])
+        page = render_html(report_from_mcap(mcap))
+        outputs.write_bytes(path, page.encode("utf-8"))
+        outputs.commit()

@@ -16,7 +16,8 @@ The stages inside :func:`time_shot`, one module each:
    keeps the film's timing (and raises :class:`TimingLimitError` if a limit is exceeded);
    ``"scale"`` slows the whole move uniformly by the smallest factor at which it and its
    run-up and run-out fit;
-   ``"optimal"`` retimes the same path time-optimally with toppra (imported only then).
+   ``"optimal"`` retimes the same path time-optimally under velocity, acceleration and jerk
+   limits (scipy's linear programming, imported only then), or keeps the scale take.
 4. **Run-up and run-out** (:mod:`~camtraj.timing.edges`). Jerk-limited ruckig moves from rest
    into the first frame's full state and from the last frame's state to rest; gentle by
    default (no more acceleration and jerk per axis than the shot uses, at least 25%).

@@ -38,7 +38,7 @@ from camtraj.timing.limits import (
     slowdown,
     violations,
 )
-from camtraj.timing.optimal import OPTIMAL_SLACK, optimal
+from camtraj.timing.optimal import optimal
 from camtraj.timing.path import FramePath, Samples
 
 Array = NDArray[np.float64]
@@ -74,8 +74,6 @@ class TimingReport:
             (``fps * max_speed``) [frames/s], for a later speed change in post.
         limiting: Every (axis, quantity) the shot's own real-time timing exceeds (what forces
             a slower take), worst first.
-        exceeded: Every (axis, quantity) the take itself still exceeds (only jerk in
-            ``"optimal"`` mode: toppra does not bound jerk). Empty otherwise.
         runup: The move from rest into the first frame: ``duration`` [s] of the ruckig move,
             ``hold`` [s] at rest before it (so the first frame lands on a servo tick),
             ``start`` axis -> start position [m or rad], ``travel`` axis -> first-frame
@@ -87,8 +85,8 @@ class TimingReport:
             ``start``, ``travel`` = end - last-frame position, ``hold`` at rest after it).
         warnings: Things a person should know that do not stop the take.
         fps: Frame rate of the input shot [frames/s].
-        ticks_per_frame: Servo samples per film frame in the take (``None`` in ``"optimal"``
-            mode, where it varies from frame to frame).
+        ticks_per_frame: Servo samples per film frame in the take (``None`` for an
+            ``"optimal"`` retime, where it varies from frame to frame).
     """
 
     peak_use: dict[str, dict[str, float]]
@@ -96,7 +94,6 @@ class TimingReport:
     max_speed: float
     feasible_fps: float
     limiting: list[LimitViolation]
-    exceeded: list[LimitViolation]
     runup: dict[str, Any]
     runout: dict[str, Any]
     warnings: list[str]
@@ -114,8 +111,7 @@ class Take:
         qd: Velocities [m/s, rad/s], shape (m, 8).
         qdd: Accelerations [m/s², rad/s²], shape (m, 8).
         qddd: Jerks [m/s³, rad/s³], shape (m, 8). Exact values for the spline and ruckig
-            parts; in the shot part of ``"optimal"`` mode the mean jerk over the following
-            servo step (toppra's time law has piecewise-constant path acceleration).
+            parts (in an ``"optimal"`` retime, of the path under its time law).
         frame_times: Time of each film frame in the take [s], shape (n,) (after run-up, after
             any retime); ``t[frame_samples] == frame_times`` exactly.
         frame_samples: Index into ``t`` of each film frame, shape (n,).
@@ -125,10 +121,11 @@ class Take:
             ``"shot"``; above 1 means slowed down, below 1 sped up).
         rate: Effective servo rate [Hz]: ``1 / step``. In ``"shot"`` and ``"scale"`` modes the
             grid is uniform and the rate is an integer multiple of the take's frame rate,
-            nearest to the requested rate; in ``"optimal"`` mode each frame interval is cut
-            into equal steps no longer than ``1 / requested rate`` and this is the lowest
+            nearest to the requested rate; in an ``"optimal"`` retime each frame interval is
+            cut into equal steps no longer than ``1 / requested rate`` and this is the lowest
             rate (longest step) used.
-        uniform: Whether every step of ``t`` has the same length.
+        uniform: Whether every step of ``t`` has the same length (not in an ``"optimal"``
+            retime; an ``"optimal"`` take that could not beat ``"scale"`` is the scale take).
         shot_start: Take time of the first film frame [s].
         shot_end: Take time of the last film frame [s].
         report: The :class:`TimingReport`.
@@ -180,8 +177,9 @@ def time_shot(
             limit is exceeded; ``"scale"`` slows the whole move by the smallest uniform factor
             at which the shot and its run-up and run-out fit every limit (position,
             velocity, acceleration and jerk); ``"optimal"`` retimes the path
-            time-optimally under velocity and acceleration limits (toppra), keeping still
-            stretches as holds of their original duration.
+            time-optimally under velocity, acceleration and jerk limits
+            (:mod:`~camtraj.timing.optimal`), keeping still stretches as holds of their
+            original duration, or keeps the scale take where that is not slower.
         rate: Requested servo rate [Hz].
         frame_numbers: Film frame number of every frame, shape (n,) (default 0..n-1); used in
             messages and reports.
@@ -203,8 +201,8 @@ def time_shot(
         ValueError: Bad shapes, non-finite values, non-increasing or non-uniform times, an
             unknown mode or a non-positive rate.
         TimingLimitError: A limit is exceeded (``"shot"`` mode, including a run-up or
-            run-out that could not stay under a velocity limit), a position limit is crossed
-            (every mode, including by the run-up or run-out), or the retime fails.
+            run-out that could not stay under a velocity limit) or a position limit is
+            crossed (every mode, including by the run-up or run-out).
     """
     q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate)
     n = q.shape[0]
@@ -224,14 +222,10 @@ def time_shot(
     if position_bad:
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
 
-    if mode == "optimal" and not math.isfinite(need):
-        need = shot_need  # no uniform slow-down has room; a retime may still end at rest
-
     def scaled() -> tuple[float, int, Samples, Array, Edge, Edge]:
         return _scale(path, dt, rate, limits, need, fit, start_q)
 
     warnings: list[str] = []
-    exceeded: list[LimitViolation] = []
     if mode == "shot":
         problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
         if limiting or problem is not None:
@@ -250,11 +244,19 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
     else:
-        scale_factor = max(1.0, need)
-        shot_t, shot_x, shot, frame_idx = optimal(path, limits, rate, scale_factor)
-        speed_factor = float(shot_t[-1] / (dt * (n - 1)))
-        ticks = 0
-        shot_rate = 0.0
+        # The scale take, unless the jerk-limited time-optimal retime is shorter; its ends
+        # are no faster than the scale take's, so its run-up and run-out have room too.
+        speed_factor, ticks, shot, shot_x, up, out = scaled()
+        shot_rate = ticks / (speed_factor * dt)
+        shot_t = np.arange(shot_x.size) / shot_rate
+        frame_idx = np.arange(n, dtype=np.int64) * ticks
+        retimed = optimal(path, limits, rate, speed_factor)
+        if retimed is not None:
+            shot_t, shot_x, shot, frame_idx = retimed
+            speed_factor = float(shot_t[-1] / (dt * (n - 1)))
+            ticks = 0  # samples per frame vary
+            shot_rate = 0.0
+            up, out = _build_edges(shot, limits, edges, start_q, 1.0 / rate, frames)
 
     # Position limits of the shot part as sampled in the take.
     take_frames = FrameMap.of(shot_x, frames)
@@ -262,22 +264,12 @@ def time_shot(
                if v.quantity == "position"]
     if pos_bad:
         raise shot_error(pos_bad, max_speed, fps)
-    if mode == "optimal":
-        exceeded = [v for v in violations(shot, limits, take_frames, OPTIMAL_SLACK)
-                    if v.quantity == "jerk"]
-        for v in exceeded:
-            warnings.append(
-                f"{v.describe()} (optimal timing does not bound jerk; "
-                "use --timing scale for a jerk-limited take)"
-            )
-    if mode == "optimal":
-        up, out = _build_edges(shot, limits, edges, start_q, 1.0 / rate, frames)
 
     # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
     step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
     n_up = up.q.shape[0]
     m = n_up + shot.q.shape[0] + out.q.shape[0]
-    if mode == "optimal":
+    if ticks == 0:  # an optimal retime: frame intervals of their own lengths
         t_shot = n_up * step + shot_t
         t = np.concatenate([
             np.arange(n_up) * step, t_shot, t_shot[-1] + np.arange(1, out.q.shape[0] + 1) * step
@@ -303,12 +295,11 @@ def time_shot(
         max_speed=max_speed,
         feasible_fps=fps * max_speed,
         limiting=limiting,
-        exceeded=exceeded,
         runup=up.report,
         runout=out.report,
         warnings=warnings + up.warnings + out.warnings,
         fps=fps,
-        ticks_per_frame=ticks if mode != "optimal" else None,
+        ticks_per_frame=ticks or None,
     )
     for arr in (t, q_all, qd_all, qdd_all, qddd_all):
         if not np.all(np.isfinite(arr)):  # pragma: no cover - a bug, not a user error

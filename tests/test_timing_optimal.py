@@ -1,0 +1,224 @@
+"""Tests of ``"optimal"`` timing: jerk-limited, never slower than ``"scale"``, frames on samples.
+
+Facts used:
+* divided differences: on any grid, ``k! * q[t0..tk]`` is a weighted mean of the k-th
+  derivative of any C^(k-1) function through the samples with a piecewise continuous k-th
+  derivative, so the divided differences of the sampled positions of a take that is inside
+  its limits everywhere (not only at the samples) never exceed the limits. Their only error is
+  float round-off: third differences of positions up to ~6 m over 4 ms steps carry ~1e-7 m/s³,
+  far below :data:`DIFF_RTOL` of the smallest jerk limit;
+* the scale take (the same path slowed uniformly) is one feasible timing, so a time-optimal
+  one is never longer;
+* joint paths solved from the repository's sample shots (read with camtraj's reader, solved by
+  the shot solver) and synthetic paths built by hand.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from camtraj.ik.path import solve_path
+from camtraj.robot import JOINT_NAMES, Robot
+from camtraj.timing import Limits, Take, TimingLimitError, time_shot
+from camtraj.usd_shot import read_shot
+from tests.shot_set import SAMPLES, SHOTS
+
+Array = NDArray[np.float64]
+FPS = 24.0
+TRACK = JOINT_NAMES.index("track")
+ROTATE = JOINT_NAMES.index("rotate")
+HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
+#: Analytic values may exceed a limit by float round-off only.
+RTOL = 1e-9
+#: Divided differences of the sampled positions may exceed a limit by this fraction (round-off
+#: of third differences; see the module docstring).
+DIFF_RTOL = 1e-6
+
+
+@pytest.fixture(scope="module")
+def robot() -> Robot:
+    return Robot.default()
+
+
+@pytest.fixture(scope="module")
+def limits(robot: Robot) -> Limits:
+    return Limits.from_robot(robot)
+
+
+def frame_times(n: int, fps: float = FPS) -> Array:
+    return np.arange(n) / fps
+
+
+def _synthetic() -> dict[str, tuple[Array, float]]:
+    """name -> (joint path (n, 8), fps)."""
+    out: dict[str, tuple[Array, float]] = {}
+    # Two moves with a hold between them (frames 72-120: nothing moves), from rest to rest.
+    n = 24 * 8 + 1
+    t = frame_times(n)
+    q = np.tile(HOME, (n, 1))
+    s1 = np.clip(t / 3.0, 0, 1)
+    s2 = np.clip((t - 5.0) / 3.0, 0, 1)
+    q[:, TRACK] += 2.0 * (s1 - np.sin(2 * np.pi * s1) / (2 * np.pi))
+    q[:, ROTATE] += 1.2 * np.sin(np.pi * s1) ** 2 - 0.8 * (1 - np.cos(np.pi * s2)) / 2
+    q[:, 6] += 0.5 * (1 - np.cos(np.pi * s2)) / 2
+    out["hold between two moves"] = (q, FPS)
+    # Every axis moving at both ends, 30 fps, too fast for real time on some axes.
+    t = frame_times(91, 30.0)
+    amp = np.array([1.5, 1.2, 0.4, 0.3, 0.6, 1.0, 0.8, 0.5])
+    periods = np.array([2.1, 1.7, 2.9, 3.3, 1.3, 1.9, 2.3, 2.7])
+    out["all axes in motion"] = (HOME + amp * np.sin(2 * np.pi * t[:, None] / periods + 0.4),
+                                 30.0)
+    # Long enough for several windows of the solver (300 frames), a slow and a fast part.
+    t = frame_times(300)
+    q = np.tile(HOME, (t.size, 1))
+    q[:, TRACK] += 3.0 * np.sin(2 * np.pi * t / 12.5) ** 2
+    q[:, ROTATE] += 0.6 * np.sin(2 * np.pi * t / 4.0) * np.exp(-t / 6.0)
+    q[:, 5] += 0.4 * np.sin(2 * np.pi * t / 3.0)
+    out["long, several windows"] = (q, FPS)
+    # Three frames only.
+    q = np.tile(HOME, (3, 1))
+    q[:, ROTATE] += [0.0, 0.05, 0.12]
+    out["three frames"] = (q, FPS)
+    return out
+
+
+SYNTHETIC = _synthetic()
+
+
+@pytest.fixture(scope="module")
+def sample_paths(robot: Robot) -> dict[str, tuple[Array, float]]:
+    """The samples' joint paths as camtraj solves them (robot base at the stage origin)."""
+    flange2camera = np.linalg.inv(robot.camera2flange)
+    out = {}
+    for name in SAMPLES:
+        shot = read_shot(SHOTS / name)
+        targets = shot.cam2world @ flange2camera
+        out[name] = (solve_path(robot, targets, frame_interval=1.0 / shot.fps),
+                     float(shot.fps))
+    return out
+
+
+@pytest.fixture(scope="module")
+def takes(
+    sample_paths: dict[str, tuple[Array, float]], limits: Limits
+) -> dict[str, tuple[Array, Take, Take]]:
+    """name -> (joint path, optimal take, scale take)."""
+    out = {}
+    for name, (q, fps) in {**sample_paths, **SYNTHETIC}.items():
+        t = frame_times(q.shape[0], fps)
+        out[name] = (q, time_shot(q, t, limits, mode="optimal"),
+                     time_shot(q, t, limits, mode="scale"))
+    return out
+
+
+NAMES = [*SAMPLES, *SYNTHETIC]
+
+
+def divided(t: Array, y: Array, order: int) -> Array:
+    """``order! * y[t_i, ..., t_{i+order}]`` per column."""
+    d = y.copy()
+    for level in range(1, order + 1):
+        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
+    return d * math.factorial(order)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_sample_is_inside_every_limit(
+    takes: dict[str, tuple[Array, Take, Take]], limits: Limits, name: str
+) -> None:
+    _, take, _ = takes[name]
+    assert take.mode == "optimal"
+    # Position: the whole take, run-up and run-out included.
+    assert np.all(take.q >= limits.lower - RTOL) and np.all(take.q <= limits.upper + RTOL)
+    bounds = (limits.velocity, limits.acceleration, limits.jerk)
+    # The analytic values of every sample.
+    for values, bound in zip((take.qd, take.qdd, take.qddd), bounds, strict=True):
+        assert np.max(np.abs(values) / bound) <= 1 + RTOL
+    # The divided differences of the sampled positions.
+    for order, bound in enumerate(bounds, start=1):
+        worst = float(np.max(np.abs(divided(take.t, take.q, order)) / bound))
+        assert worst <= 1 + DIFF_RTOL, f"order {order}: {worst:.9f} of the limit"
+    # The report agrees: no limit used beyond round-off.
+    for use in take.report.peak_use.values():
+        assert max(use.values()) <= 1 + RTOL
+    assert take.report.warnings == [] or all("jerk" not in w for w in take.report.warnings)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_never_slower_than_scale(takes: dict[str, tuple[Array, Take, Take]], name: str) -> None:
+    _, take, scale = takes[name]
+    opt = take.shot_end - take.shot_start
+    assert opt <= (scale.shot_end - scale.shot_start) * (1 + 1e-12)
+    assert take.speed_factor == pytest.approx(opt / (scale.frame_times[-1] - scale.frame_times[0])
+                                              * scale.speed_factor, rel=1e-9)
+
+
+def test_faster_than_scale_where_limits_leave_room(
+    takes: dict[str, tuple[Array, Take, Take]],
+) -> None:
+    """A retime that rides a limit: somewhere a velocity, acceleration or jerk limit is used
+    to within 1% (else it could go faster), and it beats scale on these paths."""
+    for name in (*SAMPLES, "all axes in motion", "long, several windows"):
+        _, take, scale = takes[name]
+        assert not take.uniform, name
+        ratio = (scale.shot_end - scale.shot_start) / (take.shot_end - take.shot_start)
+        assert ratio > 1.05, (name, ratio)
+        used = max(max(use[k] for k in ("velocity", "acceleration", "jerk"))
+                   for use in take.report.peak_use.values())
+        assert used >= 0.99, (name, used)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_frames_land_on_samples(
+    takes: dict[str, tuple[Array, Take, Take]], limits: Limits, name: str
+) -> None:
+    q, take, _ = takes[name]
+    assert np.array_equal(take.t[take.frame_samples], take.frame_times)
+    assert np.max(np.abs(take.q[take.frame_samples] - q)) < 1e-12
+    assert np.all(np.diff(take.t) > 0)
+    assert take.t[0] == 0.0
+    for arr in (take.qd, take.qdd):  # from rest to rest
+        assert np.all(arr[0] == 0.0) and np.all(arr[-1] == 0.0)
+    if not take.uniform:
+        assert np.max(np.diff(take.t)) <= 1 / 250.0 + 1e-12
+        assert take.report.ticks_per_frame is None
+
+
+def test_holds_stay_holds(takes: dict[str, tuple[Array, Take, Take]]) -> None:
+    q, take, _ = takes["hold between two moves"]
+    ft = take.frame_times
+    assert np.allclose(np.diff(ft[72:121]), 1 / FPS, rtol=0, atol=1e-12)  # original length
+    a, b = take.frame_samples[72], take.frame_samples[120]
+    assert np.max(np.abs(take.q[a : b + 1] - q[72])) == 0.0
+    assert np.max(np.abs(take.qd[a : b + 1])) == 0.0
+
+
+def test_where_scale_is_already_optimal_the_take_is_the_scale_take(limits: Limits) -> None:
+    """The track moving at a constant 1.2 times its velocity limit: the uniform slow-down is
+    the fastest timing there is (the velocity limit binds everywhere), so optimal keeps it."""
+    n = 49
+    t = frame_times(n)
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 1.2 * float(limits.velocity[TRACK]) * t
+    take = time_shot(q, t, limits, mode="optimal")
+    scale = time_shot(q, t, limits, mode="scale")
+    assert take.uniform
+    assert np.array_equal(take.q, scale.q)
+    assert take.speed_factor == scale.speed_factor == pytest.approx(1.2, rel=1e-6)
+
+
+def test_fails_like_scale_where_no_take_fits(limits: Limits) -> None:
+    """No jerk-limited take exists when the first frame sits on the track's end moving away
+    from it (the run-up has no room at any speed): optimal fails as scale does (it never
+    writes a take over a limit)."""
+    n = 49
+    t = frame_times(n)
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = float(limits.lower[TRACK]) + 1.5 * t
+    for mode in ("scale", "optimal"):
+        with pytest.raises(TimingLimitError, match=r"run-up into frame 0 has no room"):
+            time_shot(q, t, limits, mode=mode)
