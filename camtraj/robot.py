@@ -121,7 +121,7 @@ class IKSettings:
     margin_weight: float = 10.0
     peak_margin_weight: float = 0.1
     tie_break_weight: float = 0.01
-    track_samples: int = 2
+    track_samples: int = 4
     extend_samples: int = 2
     refine_rounds: int = 25
     refine_tolerance: float = 1e-4

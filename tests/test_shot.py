@@ -192,9 +192,10 @@ def test_the_first_frame_is_chosen_for_the_shot_not_the_start(robot: Robot) -> N
     elsewhere[0], elsewhere[3], elsewhere[1] = 10.0, 1.2, 1.0
     b = solve_path_report(robot, targets, elsewhere, frame_interval=1 / 24)
     # the same configurations; a revolute axis may take another whole turn (the one nearer the
-    # start, within its limits)
+    # start, within its limits); the refinement, run on angles a turn apart, rounds
+    # differently and may stop a step apart: the same to well under a thousandth of a degree
     turns = (b.q - a.q) / (2 * math.pi)
-    np.testing.assert_allclose(turns, np.rint(turns), atol=1e-12)
+    np.testing.assert_allclose(turns, np.rint(turns), atol=1e-6)
     assert np.all(np.rint(turns)[:, [0, 3]] == 0)
     np.testing.assert_allclose(b.move_to_start.travel, b.q[0] - elsewhere, atol=1e-15)
     assert a.move_to_start.duration > 0.0 and b.move_to_start.duration > 0.0

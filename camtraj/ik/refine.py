@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
-from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost
+from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, margin_peak
 from camtraj.ik.spline_ops import BandOp
 from camtraj.robot import Robot
 
@@ -236,11 +236,11 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[Array, A
     g_win = np.lib.stride_tricks.sliding_window_view(g_pad, width, axis=0)[:n]  # (n,8,2,D)
     H = np.einsum("dki,kip,kiqd->kdpq", M[:, pad:pad + n], G, g_win, optimize=True)
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
-    # singularity distance itself), mean over frames
+    # singularity distance itself), the worst frame's through its power mean
     e = cost.intrusion(y)
     active = e > 0
     if active.any():
-        lam = cost.refine_margin / n
+        lam = (cost.refine_margin * cost.scale * margin_peak(e)[1])[:, None]
         close = np.maximum(e - CLOSE, 0.0)
         lower_near = (y[:, :8] - cost.lower) <= (cost.upper - y[:, :8])
         dd = np.concatenate([np.where(lower_near, 1.0, -1.0), np.ones((n, 2))], axis=1)

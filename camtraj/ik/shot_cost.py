@@ -23,9 +23,9 @@ run-out to stay under the velocity limit). The solver works in two passes:
   singularity distance and the full-stretch distance (:mod:`camtraj.ik.margins`).
 * The refinement lowers P itself through a smooth stand-in, the power mean
   ``scale * (sum (u / scale)^power)^(1/power)`` over every use u of the take (raised in
-  stages towards the maximum), plus ``refine_margin`` times the mean squared margin
-  intrusion (steeper in the last fifth of a zone), ``tie_break`` times the mean F per step,
-  and the run-up and run-out room (:meth:`ShotCost.refine_total`).
+  stages towards the maximum), plus ``refine_margin`` times the peak use times the worst
+  frame's squared margin intrusions (steeper in the last fifth of a zone), ``tie_break``
+  times the mean F per step, and the run-up and run-out room (:meth:`ShotCost.refine_total`).
 
 The first frame carries no motion term: the run-up brings the robot there, whatever the start.
 A shot that starts or ends in motion needs room for its run-up and run-out: the first and last
@@ -52,6 +52,22 @@ N_MEASURES = 10  # the 8 joints, the wrist singularity distance, the full-stretc
 #: of the zone: 5 deg before a revolute limit by default), so the spline through the frames
 #: has room to turn before a limit.
 CLOSE = 0.8
+
+
+MARGIN_POWER = 4.0  # the power mean over frames that stands in for the worst frame
+
+
+def margin_peak(e: Array) -> tuple[float, Array]:
+    """A smooth stand-in for the worst frame's sum of squared margin intrusions e (n, 10):
+    E = (sum_k m_k^Q)^(1/Q) with m_k = sum_j e_kj^2 and Q = :data:`MARGIN_POWER`, and
+    dE / dm_k (n,). A margin is a constraint the take may give up only where that buys speed:
+    weighed against the peak use, not diluted by the frames that keep it."""
+    m = (e * e).sum(axis=1)
+    total = float((m ** MARGIN_POWER).sum())
+    if total <= 0.0:
+        return 0.0, np.zeros_like(m)
+    big = total ** (1.0 / MARGIN_POWER)
+    return big, np.asarray((m / big) ** (MARGIN_POWER - 1.0))
 
 
 @dataclass(frozen=True)
@@ -96,8 +112,9 @@ class ShotCost:
         velocity, overspeed, margin: The dynamic programme's weights.
         zone: Width of the margin zone (10,): per axis [m, rad], then wrist and stretch [rad].
         dt: Frame interval [s]; a_max, j_max: acceleration and jerk limits (8,).
-        refine_margin, close_weight, tie_break: The refinement's weights of the mean squared
-            margin intrusion, of the steep part of a zone, and of the mean F per step.
+        refine_margin, close_weight, tie_break: The refinement's weights of the worst
+            frame's squared margin intrusions (relative to the peak use), of the steep part
+            of a zone, and of the mean F per step.
         power, scale: The refinement's power mean of the take's uses.
     """
 
@@ -192,14 +209,14 @@ class ShotCost:
     def refine_total(self, y: Array, use: TakeUse | None = None) -> float:
         """What the refinement minimises for measures y (n, 10):
         ``scale * (sum (u / scale)^power)^(1/power)`` over every use u of the take
-        (:class:`TakeUse`), a smooth stand-in for its peak, + ``refine_margin`` * mean
-        squared margin intrusion (steeper in the last part of a zone) + ``tie_break`` * mean
-        motion per step + run-up / run-out room."""
+        (:class:`TakeUse`), a smooth stand-in for its peak, + ``refine_margin * scale`` times
+        the worst frame's squared margin intrusions (:func:`margin_peak`; steeper in the last
+        part of a zone) + ``tie_break`` * mean motion per step + run-up / run-out room."""
         q = y[:, :8]
         n = q.shape[0]
         e = self.intrusion(y)
         close = np.maximum(e - CLOSE, 0.0)
-        j = (self.refine_margin * float((e * e).sum()) / n
+        j = (self.refine_margin * self.scale * margin_peak(e)[0]
              + self.close_weight * float((close * close).sum()))
         if n > 1:
             use = use or self.take_use(q)

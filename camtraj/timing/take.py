@@ -215,7 +215,7 @@ def time_shot(
     real = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames)
     path, rt_x, rt, rt_checked, rt_checked_x = (real.path, real.x, real.stream, real.checked,
                                                 real.checked_x)
-    fit, shot_need, need, max_speed = real.fit, real.shot_need, real.need, real.max_speed
+    fit, need, max_speed = real.fit, real.need, real.max_speed
     ticks0 = real.ticks
     limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
     position_bad = [v for v in limiting if v.quantity == "position"]
