@@ -358,12 +358,29 @@ def run_warnings(analysis: Analysis) -> list[str]:
     """Things a person should know about a finished run that do not stop the take."""
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
-    relaxed_step = shot.frames[~path.within_step].tolist()
     warnings = [*shot.warnings, *take.report.warnings]
-    if relaxed_step and take.mode == "shot":
-        warnings.append(f"{len(relaxed_step)} frame(s) move an axis faster than its velocity "
-                        f"limit between frames: first {relaxed_step[0]}")
+    flip = step_warning(analysis.robot, path, shot.frames, 1.0 / shot.fps)
+    if flip:
+        warnings.append(flip)
     return warnings
+
+
+def step_warning(robot: Robot, path: PathSolution, frames: NDArray[np.int_],
+                 dt: float) -> str | None:
+    """A warning where the joint path jumps: a frame-to-frame step beyond what an axis can
+    do in one frame at its velocity limit (a flip, or a wrap around a limit). The take then
+    has to slow the whole shot to cover it; the largest such step is named."""
+    if path.within_step.all():
+        return None
+    steps = np.abs(np.diff(path.q, axis=0)) / (robot.max_velocity * dt)
+    k, j = np.unravel_index(int(np.argmax(steps)), steps.shape)
+    step = float(path.q[k + 1, j] - path.q[k, j])
+    size = f"{math.degrees(step):+.1f} deg" if REVOLUTE[j] else f"{step:+.3f} m"
+    count = int((~path.within_step).sum())
+    which = "" if path.objective == "shot" else f" of the {path.objective} objective"
+    return (f"{count} frame(s) jump: {JOINT_NAMES[j]} moves {size} between frames "
+            f"{int(frames[k])} and {int(frames[k + 1])}, {float(steps[k, j]):.1f}x what it can "
+            f"move in one frame (a flip{which}); the take is slowed to cover it")
 
 
 def summary(

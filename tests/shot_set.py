@@ -681,10 +681,11 @@ EFFORT = 10
 
 def with_effort(robot: Robot, k: float) -> Robot:
     """``robot`` with k times the IK effort: k times the refinement rounds per stage, a k times
-    tighter convergence test and about k times the candidates (sqrt(k) times the track and
-    extend samples each). The one place that knows the solver's effort knobs."""
+    tighter convergence test, and about k times the dynamic programme's work (its cost grows
+    with the square of the candidates: k^(1/4) times the track and extend samples each). The
+    one place that knows the solver's effort knobs."""
     ik = robot.ik
-    grid = math.sqrt(k)
+    grid = k ** 0.25
     return dataclasses.replace(robot, ik=dataclasses.replace(
         ik,
         refine_rounds=min(1000, round(ik.refine_rounds * k)),

@@ -560,3 +560,30 @@ def test_summary_matches_the_shot(runs: dict[str, Run], key: str) -> None:
     assert summary["duration"] == pytest.approx(take.t[-1], abs=1e-9)
     assert summary["shot_start"] == pytest.approx(take.frame_times[0], abs=1e-9)
     assert summary["shot_end"] == pytest.approx(take.frame_times[-1], abs=1e-9)
+
+
+def test_a_jump_between_frames_is_named_with_its_axis_frames_and_size() -> None:
+    """The papers' per-frame objective swings the wrist half a turn between two frames of the
+    crane-up (its pan wraps round): check says so, with the axis, the frames and the step,
+    recomputed here from the joint path the IK gives; the default objective does not jump."""
+    from camtraj.ik import solve_path
+    from camtraj.usd_shot import read_shot
+
+    shot_path = SHOTS / "blender_crane_up.usda"
+    proc = run_cli("check", shot_path, "--objective", "paper", "--timing", "scale", "--json")
+    assert proc.returncode == 0, proc.stderr
+    jumps = [w for w in json.loads(proc.stdout)["warnings"] if "jump" in w]
+    assert len(jumps) == 1, jumps
+    robot = Robot.default()
+    shot = read_shot(shot_path)
+    q = solve_path(robot, shot.cam2world @ np.linalg.inv(robot.camera2flange),
+                   objective="paper")
+    steps = np.abs(np.diff(q, axis=0)) / (robot.max_velocity / shot.fps)
+    k, j = np.unravel_index(int(np.argmax(steps)), steps.shape)
+    assert steps[k, j] > 1.0
+    step = math.degrees(float(q[k + 1, j] - q[k, j]))
+    assert (f"{JOINT_NAMES[j]} moves {step:+.1f} deg between frames {shot.frames[k]} and "
+            f"{shot.frames[k + 1]}") in jumps[0]
+    plain = run_cli("check", shot_path, "--json")
+    assert plain.returncode == 0, plain.stderr
+    assert not [w for w in json.loads(plain.stdout)["warnings"] if "jump" in w]
