@@ -17,6 +17,7 @@ be handled, and still leaves nothing (the temporary files are unnamed).
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import pty
@@ -40,6 +41,8 @@ OLD_MCAP, OLD_SUMMARY = b"an earlier, good take\n", b'{"status": "ok"}\n'
 TIMEOUT = 240.0  # s: generous, for a loaded 2-core machine
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGKILL": signal.SIGKILL}
 MOMENTS = ("import", "usd_import", "solve", "write")
+CONSOLE_SCRIPT = "import sys\nfrom camtraj.__main__ import run\nsys.exit(run())\n"
+"""What the ``camtraj`` console script that pip writes runs."""
 
 
 @pytest.fixture(scope="module")
@@ -199,3 +202,70 @@ def test_ctrl_c_during_the_usd_import_is_not_swallowed(
         assert (code, err) == (130, "ERROR: stopped by SIGINT; nothing was written\n")
         assert run.out.read_bytes() == OLD_MCAP
         assert sorted(p.name for p in folder.iterdir()) == ["take.mcap", "take.summary.json"]
+
+
+def _committed(run: Run) -> bool:
+    try:
+        return run.out.read_bytes() != OLD_MCAP and run.summary.read_bytes() != OLD_SUMMARY
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_after_the_commit_lets_the_run_finish(
+    shots: dict[str, Path], tmp_path: Path, name: str
+) -> None:
+    """Sent again and again from the moment both outputs are replaced until the process has
+    ended, so some arrive while Python shuts down (issue 14, §4)."""
+    for attempt in range(2):
+        folder = tmp_path / f"a{attempt}"
+        folder.mkdir()
+        run = Run(shots["part"], folder, "-q")
+        try:
+            run.wait_for(lambda run=run: _committed(run), "the commit", 0.0005)  # type: ignore[misc]
+            while run.proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    run.proc.send_signal(SIGNALS[name])
+                time.sleep(0.0005)
+            code, err = run.finish()
+        finally:
+            if run.proc.poll() is None:
+                run.proc.kill()
+                run.proc.wait()
+        assert (code, err) == (0, ""), f"attempt {attempt}: {err}"
+        assert sorted(p.name for p in folder.iterdir()) == ["take.mcap", "take.summary.json"]
+        assert run.out.read_bytes().startswith(b"\x89MCAP0\r\n")
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_from_the_first_line_of_camtraj_on_gives_one_line(
+    tmp_path: Path, name: str
+) -> None:
+    """From the import of ``camtraj.__main__`` on, at several delays (issue 14, §4).
+
+    ``-X importtime`` reports each finished import on stderr as it happens; the command is
+    started as the ``camtraj`` console script starts it.
+    """
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    script = tmp_path / "camtraj"
+    script.write_text(CONSOLE_SCRIPT)
+    for delay in (0.0, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032):
+        proc = subprocess.Popen(
+            [sys.executable, "-X", "importtime", str(script), "convert",
+             str(tmp_path / "missing.usda"), "-o", str(tmp_path / "x.mcap")],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        assert proc.stderr is not None
+        lines = []
+        while True:
+            line = proc.stderr.readline().decode()
+            assert line, f"no end of Python's start: {lines}"
+            lines.append(line)
+            if line.rstrip().endswith("| camtraj.__main__"):
+                break
+        time.sleep(delay)
+        proc.send_signal(SIGNALS[name])
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+        errors = [ln for ln in err.splitlines() if not ln.startswith("import time:")]
+        assert proc.returncode == 128 + SIGNALS[name], (delay, err)
+        assert errors == [f"ERROR: stopped by {name}; nothing was written"], (delay, err)
+        assert not (tmp_path / "x.mcap").exists()
