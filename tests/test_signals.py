@@ -269,3 +269,76 @@ def test_a_signal_from_the_first_line_of_camtraj_on_gives_one_line(
         assert proc.returncode == 128 + SIGNALS[name], (delay, err)
         assert errors == [f"ERROR: stopped by {name}; nothing was written"], (delay, err)
         assert not (tmp_path / "x.mcap").exists()
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (a batch's fork server and its workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        children.setdefault(ppid, []).append(int(entry))
+    found: set[int] = set()
+    todo = [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def _writes_into(pids: set[int], folder: Path) -> bool:
+    """One of ``pids`` has a file open in ``folder`` (a shot's temporary output)."""
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                with contextlib.suppress(OSError):
+                    if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(f"{folder}/"):
+                        return True
+    return False
+
+
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_batch_process_alone_stops_its_shots(
+    shots: dict[str, Path], tmp_path: Path, name: str
+) -> None:
+    """A farm scheduler signals the batch process only, not its workers (issue 14, §4): the
+    running shot stops, the queued ones never start, and nothing is written."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    (folder / "a.mcap").write_bytes(OLD_MCAP)  # an earlier result stays as it was
+    shot_files = []
+    for stem in "abc":
+        shot_files.append(tmp_path / f"{stem}.usda")
+        shot_files[-1].write_bytes(shots["minute"].read_bytes())
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camtraj", "batch", *map(str, shot_files), "-o", str(folder),
+         "-j", "1", "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    start = time.monotonic()
+    workers: set[int] = set()
+    try:
+        while not _writes_into(workers, folder):
+            assert proc.poll() is None, "the batch ended before a shot started"
+            assert time.monotonic() - start < TIMEOUT, "no shot started"
+            workers = _descendants(proc.pid)
+            time.sleep(0.01)
+        proc.send_signal(SIGNALS[name])
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + SIGNALS[name], err
+    assert err.splitlines() == [f"ERROR: stopped by {name}"], err
+    assert sorted(p.name for p in folder.iterdir()) == ["a.mcap"]
+    assert (folder / "a.mcap").read_bytes() == OLD_MCAP
+    while any(Path(f"/proc/{pid}").exists() for pid in workers):  # no worker goes on
+        assert time.monotonic() - start < TIMEOUT, "a worker is still running"
+        time.sleep(0.05)
+    assert sorted(p.name for p in folder.iterdir()) == ["a.mcap"]
