@@ -12,7 +12,6 @@ import math
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
+from camtraj.analysis import Analysis, Placement
 from camtraj.errors import InfeasibleError, InputError, ShotFileError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.inputs import require_regular_files, run_inputs
@@ -30,54 +30,10 @@ from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.set_file import SetFile
-from camtraj.timing import Limits, Take, time_shot
+from camtraj.timing import Limits, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class Placement:
-    """Where the robot base stands in the stage (metres, Z-up after unit/axis conversion).
-
-    ``base2world`` maps robot base coordinates into the converted stage world.
-    """
-
-    base2world: Array = field(default_factory=lambda: np.eye(4))
-    source: str = "default (identity)"
-
-    @classmethod
-    def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,
-                     source: str = "--placement") -> Placement:
-        a = math.radians(yaw_deg)
-        T = np.eye(4)
-        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                     [0.0, 0.0, 1.0]]
-        T[:3, 3] = (x, y, z)
-        return cls(T, source)
-
-    def describe(self) -> dict[str, Any]:
-        R = self.base2world[:3, :3]
-        return {
-            "source": self.source,
-            "translation_m": self.base2world[:3, 3].tolist(),
-            "yaw_deg": math.degrees(math.atan2(R[1, 0], R[0, 0])),
-            "rotation": R.tolist(),
-        }
-
-
-@dataclass
-class Analysis:
-    """Everything one run computed; ``take`` is None when the IK or timing stage failed."""
-
-    shot: Shot
-    robot: Robot
-    placement: Placement
-    targets: Array  # (n, 4, 4) camera2base
-    path: PathSolution | None = None
-    take: Take | None = None
-    timings: dict[str, float] = field(default_factory=dict)
-    collision: dict[str, Any] | None = None  # what the collision check found, if it ran
 
 
 MAX_DISTANCE_M = 1.0e6

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError
 
 if TYPE_CHECKING:
-    from camtraj.convert import Analysis
+    from camtraj.analysis import Analysis
     from camtraj.mcap_io import ReadTake
     from camtraj.options import ConvertOptions
 
