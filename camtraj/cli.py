@@ -208,7 +208,9 @@ def main() -> None:
               "and frustum, axis plots, shot frames).")
 @click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
               help="Also write the HTML report (plots of every axis, top and side views).")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress display and nothing on stdout (the files asked for are still "
+              "written; warnings and errors still go to stderr).")
 def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
             layout: str | None, report: str | None, quiet: bool, **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
@@ -247,7 +249,7 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
 @click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
               help="Also write the HTML report; for a shot that cannot be done it shows "
               "where and why.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress display (the report is printed).")
 def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) -> None:
     """Check whether the robot can do SHOT as asked, writing nothing.
 
@@ -280,6 +282,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
         click.echo(jsonsafe.dumps(result, sort_keys=True))
     else:
         click.echo(_report(result))
+        if result["status"] == "ok":
+            click.echo(_verdict(result))
     sys.exit(EXIT_OK if result["status"] == "ok" else EXIT_INFEASIBLE)
 
 
@@ -429,6 +433,15 @@ def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float)
     shown = feasible_fps if feasible_fps is not None else max_speed * fps
     return (f"{math.floor(100.0 * max_speed)}% of real time "
             f"(could be shot at {_floor(shown, 2)} fps)")
+
+
+def _verdict(r: dict[str, Any]) -> str:
+    """A feasible check's last line: 'SHOT: FEASIBLE at shot timing, 206% of real time ...'."""
+    timing = r["timing"]
+    how = (f"{timing} timing" if r["speed_factor"] == 1.0
+           else f"{timing} timing, {r['speed_factor']:.3f}x slower than the shot")
+    return (f"{r['shot']}: FEASIBLE at {how}; maximum feasible speed "
+            f"{_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}")
 
 
 def _pct(x: float) -> str:
