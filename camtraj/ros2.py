@@ -1,10 +1,9 @@
 """ROS 2 facts the MCAP writer needs: QoS profiles, CameraInfo intrinsics, camtraj's messages.
 
 **QoS.** Every channel carries ``offered_qos_profiles``, the YAML that rosbag2 stores per topic
-(a list with one profile). It is written in rosbag2's integer form (metadata version 8, as
-Humble writes it): a rosbag2 that finds no ``rosbag2`` metadata record in an MCAP reads the
-profiles as version 8, whose decoder wants integers for reliability, durability and liveliness
-(newer rosbag2 writes names, but only together with that record). Durations are 0 s 0 ns,
+(a list with one profile). It is written in rosbag2's metadata version 8 form, as Humble
+writes it, with integers for reliability, durability and liveliness (the tests read it back
+with the ``rosbags`` library). Durations are 0 s 0 ns,
 "unspecified" (rmw's defaults). Latched topics (``/tf_static``, ``/robot_description``) are
 offered ``transient_local`` with depth 1, so a subscriber that joins late still gets them;
 every other topic is ``volatile`` with depth 10. All are reliable and keep_last.
