@@ -25,6 +25,7 @@ from camtraj.errors import CamtrajError, CollisionError, InputError, Unreachable
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
+from camtraj.shown import percent, seconds, speed_percent
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -431,7 +432,7 @@ def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float)
         return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
                 f"{_floor(MAX_SHOWN_SPEED * fps, 0)} fps)")
     shown = feasible_fps if feasible_fps is not None else max_speed * fps
-    return (f"{math.floor(100.0 * max_speed)}% of real time "
+    return (f"{speed_percent(max_speed)} of real time "
             f"(could be shot at {_floor(shown, 2)} fps)")
 
 
@@ -445,9 +446,7 @@ def _verdict(r: dict[str, Any]) -> str:
 
 
 def _pct(x: float) -> str:
-    if not math.isfinite(x):
-        return "   -"
-    return f"{100 * x:4.0f}%" if x < 100.0 else ">9999%"
+    return percent(x).rjust(5)
 
 
 def _edge_use(r: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -491,8 +490,9 @@ def _report(r: dict[str, Any]) -> str:
     lines = [
         f"{r['shot']}  camera {r['camera']}  frames {fr['first']}-{fr['last']} "
         f"({fr['count']} at {r['fps']:g} fps)",
-        f"  timing {r['timing']}: take {r['duration']:.2f} s (shot {r['shot_start']:.2f}-"
-        f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
+        f"  timing {r['timing']}: take {seconds(r['duration'])} s (shot "
+        f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
+        f"speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
@@ -518,9 +518,9 @@ def _report(r: dict[str, Any]) -> str:
                  f"margin column: nearest position limit")
     lines.append(f"  move to start: {start['duration_s']:.2f} s from the start pose (to start "
                  f"column: travel per axis)")
-    lines.append(f"  run-up {r['runup']['duration_s']:.2f} s, run-out "
-                 f"{r['runout']['duration_s']:.2f} s ({r.get('edges', 'gentle')}; ends column: "
-                 "their peak use of the limits)")
+    lines.append(f"  run-up {seconds(r['runup']['duration_s'])} s, run-out "
+                 f"{seconds(r['runout']['duration_s'])} s ({r.get('edges', 'gentle')}; "
+                 "ends column: their peak use of the limits)")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

@@ -329,7 +329,7 @@ def take_data(analysis: Analysis) -> TakeData:
 def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions) -> dict[str, str]:
     """The ``camtraj`` metadata record (design.md §4)."""
     take, shot, robot = analysis.take, analysis.shot, analysis.robot
-    assert take is not None
+    assert take is not None and analysis.path is not None
     mount = {"camera2flange": robot.camera2flange.tolist()}
     return {
         "source_file": str(shot_path),
@@ -342,13 +342,15 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "mount": json.dumps(mount, sort_keys=True),
         "timing_mode": take.mode,
         "speed_factor": repr(float(take.speed_factor)),
-        "servo_rate_hz": repr(float(take.rate)),
+        "servo_rate_hz": repr(round(float(take.rate), 9)),  # 240.0, not 239.99999999999997
         "max_speed": repr(float(take.report.max_speed)),
         "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
         # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
         "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
         "position_range": json.dumps(take.report.position_range, sort_keys=True),
+        # The margins the terminal prints, for the report of the file.
+        "margins": json.dumps(margins_summary(analysis.path, shot.frames), sort_keys=True),
     }
 
 
@@ -411,7 +413,7 @@ def summary(
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup),
         "move_to_start": _move_to_start(path),
-        "margins": _margins(path, shot.frames),
+        "margins": margins_summary(path, shot.frames),
         "runout": extents(rep.runout),
         "warnings": warnings,
         "collision": analysis.collision,
@@ -431,7 +433,7 @@ def _move_to_start(path: PathSolution) -> dict[str, Any]:
     }
 
 
-def _margins(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
+def margins_summary(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
     """Smallest distances to the position limits (per axis), the wrist singularity and full
     stretch over the shot, with the film frame where each occurs (degrees / metres)."""
     m = path.margins

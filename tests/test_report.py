@@ -193,7 +193,7 @@ def test_both_sources_render_the_same_report(runs: Runs) -> None:
     assert summary_rows.findall(conv) == summary_rows.findall(rep)
     cells = re.compile(r"<td class='num[^']*'>([^<]+)</td>")
     a, b = cells.findall(conv), cells.findall(rep)
-    assert len(a) == len(b) == 8 * 6
+    assert len(a) == len(b) == 8 * (6 + 2)  # margins table, then nearest position limits
     for x, y in zip(a, b, strict=True):
         if x.endswith("%"):  # jerk: exact in memory, by differences from the file
             assert abs(int(x[:-1]) - int(y[:-1])) <= 1, (x, y)
