@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from camtraj.timing import Take
     from camtraj.usd_shot import Shot
 
-__all__ = ["Analysis", "Placement"]
+__all__ = ["Analysis", "Placement", "axis_value", "margins_summary"]
 
 Array = NDArray[np.float64]
 
@@ -66,3 +66,28 @@ class Analysis:
     take: Take | None = None
     timings: dict[str, float] = field(default_factory=dict)
     collision: dict[str, Any] | None = None  # what the collision check found, if it ran
+
+
+def axis_value(name: str, value: float) -> float:
+    """SI value for display: degrees for revolute axes, metres otherwise."""
+    from camtraj.robot import JOINT_NAMES, REVOLUTE
+
+    return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
+
+
+def margins_summary(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
+    """Smallest distances to the position limits (per axis), the wrist singularity and full
+    stretch over the shot, with the film frame where each occurs (degrees / metres)."""
+    from camtraj.robot import JOINT_NAMES
+
+    m = path.margins
+    return {
+        "to_limits": {k: axis_value(k, float(v))
+                      for k, v in zip(JOINT_NAMES, m.to_limits, strict=True)},
+        "to_limits_frame": {k: int(frames[i])
+                            for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)},
+        "wrist_singularity_deg": math.degrees(m.wrist),
+        "wrist_singularity_frame": int(frames[m.wrist_frame]),
+        "full_stretch_deg": math.degrees(m.stretch),
+        "full_stretch_frame": int(frames[m.stretch_frame]),
+    }
