@@ -11,7 +11,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MIN_PY := 3.11
 
-.PHONY: all demo test lint typecheck unit bench clean samples check-python chromium
+.PHONY: all demo test lint typecheck unit bench clean samples check-python chromium readme
 
 all: demo
 
@@ -79,3 +79,9 @@ samples: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+
+# Rewrite the example outputs (```console blocks) of README.md and pipelines/README.md with what
+# camtraj prints now; tests/test_readme.py fails until they agree (run this after a change that
+# moves a number, then read the diff).
+readme: $(STAMP)
+	$(BIN)/python tests/readme_examples.py --write

@@ -33,6 +33,7 @@ import json
 import math
 import multiprocessing
 import os
+import signal
 import sys
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -42,7 +43,7 @@ from typing import Any, Literal
 
 import click
 
-from camtraj import __version__, jsonsafe
+from camtraj import __version__, interrupts, jsonsafe
 from camtraj.errors import CamtrajError, InputError
 from camtraj.folders import check_can_make, make_parent
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
@@ -331,10 +332,17 @@ def _format_speed(speed: Any) -> str:
 def _convert_one(
     shot: str, output: str, summary_path: str, options: ConvertOptions, rig_layer: str | None
 ) -> dict[str, Any]:
-    """Worker: convert one shot; never raises (the outcome comes back as a plain dict)."""
+    """Worker: convert one shot; never raises (the outcome comes back as a plain dict).
+
+    SIGINT and SIGTERM stop the shot (its outputs are discarded, as ``convert``'s); between
+    shots the worker ignores them. A shot that starts after the batch was stopped is not run.
+    """
     start = time.perf_counter()
     cpu_start = time.process_time()
+    interrupts.install()  # before looking at the stop: a stop sent before this is seen there
     try:
+        if _stop is not None and _stop.is_set():
+            raise interrupts.Interrupted(signal.SIGTERM)
         from camtraj.convert import convert
 
         # The options are recorded so that a later batch with other options does not skip
@@ -356,16 +364,43 @@ def _convert_one(
             "exit_code": 1,
             "error": type(exc).__name__,
         }
+    except KeyboardInterrupt as exc:
+        stop = exc if isinstance(exc, interrupts.Interrupted) else None
+        outcome = {
+            "status": "failed",
+            "reason": f"stopped by {stop.signal_name if stop else 'SIGINT'}",
+            "exit_code": stop.exit_code if stop else 130,
+            "error": "Interrupted",
+        }
     else:
         outcome = {"status": "ok", "summary": summary}
+    finally:
+        interrupts.ignore()
     outcome["seconds"] = time.perf_counter() - start
     outcome["cpu_seconds"] = time.process_time() - cpu_start
     return outcome
 
 
-def _warm_up() -> None:
+_stop: Any = None
+"""In a worker: the batch's stop event (a ``multiprocessing.Event``), set when it is stopped."""
+
+
+def _warm_up(stop: Any) -> None:
     """Worker initializer: import the pipeline once per worker, not once per shot."""
+    global _stop
+    _stop = stop
+    interrupts.ignore()  # between shots; a shot handles them (_convert_one)
     import camtraj.convert  # noqa: F401
+
+
+def _stop_workers(pool: cf.ProcessPoolExecutor, stop: Any, signum: int) -> None:
+    """Stop the batch: no more shots start, the running ones stop (their outputs discarded)."""
+    stop.set()
+    for process in list((pool._processes or {}).values()):  # no public list of them
+        with contextlib.suppress(OSError):
+            if process.pid is not None:
+                os.kill(process.pid, signum)
+    pool.shutdown(wait=True, cancel_futures=True)  # the stopped shots end quickly
 
 
 _ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -545,9 +580,12 @@ def run_batch(
     if todo:
         from tqdm import tqdm
 
+        context = _mp_context()
+        stop = context.Event()
         with (
             cf.ProcessPoolExecutor(
-                max_workers=workers, mp_context=_mp_context(), initializer=_warm_up
+                max_workers=workers, mp_context=context, initializer=_warm_up,
+                initargs=(stop,),
             ) as pool,
             tqdm(
                 total=len(todo),
@@ -577,8 +615,11 @@ def run_batch(
                     results[i] = result
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)
-            except KeyboardInterrupt:
-                pool.shutdown(wait=False, cancel_futures=True)
+            except KeyboardInterrupt as exc:
+                # A SIGTERM may have been sent to this process alone (a farm scheduler
+                # cancelling the task): pass it on to the workers.
+                signum = exc.signum if isinstance(exc, interrupts.Interrupted) else signal.SIGINT
+                _stop_workers(pool, stop, signum)
                 raise
 
     report = BatchReport(

@@ -25,6 +25,7 @@ from camtraj.errors import CamtrajError, CollisionError, InputError, Unreachable
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
+from camtraj.shown import percent, seconds, speed_percent
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -208,7 +209,9 @@ def main() -> None:
               "and frustum, axis plots, shot frames).")
 @click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
               help="Also write the HTML report (plots of every axis, top and side views).")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar and no report.")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress display and nothing on stdout (the files asked for are still "
+              "written; warnings and errors still go to stderr).")
 def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
             layout: str | None, report: str | None, quiet: bool, **kw: Any) -> None:
     """Convert SHOT (a USD camera animation) into a motion-control MCAP file.
@@ -247,7 +250,7 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
 @click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
               help="Also write the HTML report; for a shot that cannot be done it shows "
               "where and why.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress display (the report is printed).")
 def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) -> None:
     """Check whether the robot can do SHOT as asked, writing nothing.
 
@@ -280,6 +283,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
         click.echo(jsonsafe.dumps(result, sort_keys=True))
     else:
         click.echo(_report(result))
+        if result["status"] == "ok":
+            click.echo(_verdict(result))
     sys.exit(EXIT_OK if result["status"] == "ok" else EXIT_INFEASIBLE)
 
 
@@ -427,14 +432,21 @@ def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float)
         return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
                 f"{_floor(MAX_SHOWN_SPEED * fps, 0)} fps)")
     shown = feasible_fps if feasible_fps is not None else max_speed * fps
-    return (f"{math.floor(100.0 * max_speed)}% of real time "
+    return (f"{speed_percent(max_speed)} of real time "
             f"(could be shot at {_floor(shown, 2)} fps)")
 
 
+def _verdict(r: dict[str, Any]) -> str:
+    """A feasible check's last line: 'SHOT: FEASIBLE at shot timing, 206% of real time ...'."""
+    timing = r["timing"]
+    how = (f"{timing} timing" if r["speed_factor"] == 1.0
+           else f"{timing} timing, {r['speed_factor']:.3f}x slower than the shot")
+    return (f"{r['shot']}: FEASIBLE at {how}; maximum feasible speed "
+            f"{_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}")
+
+
 def _pct(x: float) -> str:
-    if not math.isfinite(x):
-        return "   -"
-    return f"{100 * x:4.0f}%" if x < 100.0 else ">9999%"
+    return percent(x).rjust(5)
 
 
 def _edge_use(r: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -478,8 +490,9 @@ def _report(r: dict[str, Any]) -> str:
     lines = [
         f"{r['shot']}  camera {r['camera']}  frames {fr['first']}-{fr['last']} "
         f"({fr['count']} at {r['fps']:g} fps)",
-        f"  timing {r['timing']}: take {r['duration']:.2f} s (shot {r['shot_start']:.2f}-"
-        f"{r['shot_end']:.2f} s), speed factor {r['speed_factor']:.3f}, "
+        f"  timing {r['timing']}: take {seconds(r['duration'])} s (shot "
+        f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
+        f"speed factor {r['speed_factor']:.3f}, "
         f"servo {r['servo_rate_hz']:.1f} Hz",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
@@ -505,9 +518,9 @@ def _report(r: dict[str, Any]) -> str:
                  f"margin column: nearest position limit")
     lines.append(f"  move to start: {start['duration_s']:.2f} s from the start pose (to start "
                  f"column: travel per axis)")
-    lines.append(f"  run-up {r['runup']['duration_s']:.2f} s, run-out "
-                 f"{r['runout']['duration_s']:.2f} s ({r.get('edges', 'gentle')}; ends column: "
-                 "their peak use of the limits)")
+    lines.append(f"  run-up {seconds(r['runup']['duration_s'])} s, run-out "
+                 f"{seconds(r['runout']['duration_s'])} s ({r.get('edges', 'gentle')}; "
+                 "ends column: their peak use of the limits)")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

@@ -12,7 +12,6 @@ import math
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
+from camtraj.analysis import Analysis, Placement, axis_value, margins_summary
 from camtraj.errors import InfeasibleError, InputError, ShotFileError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.inputs import require_regular_files, run_inputs
@@ -28,56 +28,12 @@ from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
-from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
+from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile
-from camtraj.timing import Limits, Take, time_shot
+from camtraj.timing import Limits, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class Placement:
-    """Where the robot base stands in the stage (metres, Z-up after unit/axis conversion).
-
-    ``base2world`` maps robot base coordinates into the converted stage world.
-    """
-
-    base2world: Array = field(default_factory=lambda: np.eye(4))
-    source: str = "default (identity)"
-
-    @classmethod
-    def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,
-                     source: str = "--placement") -> Placement:
-        a = math.radians(yaw_deg)
-        T = np.eye(4)
-        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                     [0.0, 0.0, 1.0]]
-        T[:3, 3] = (x, y, z)
-        return cls(T, source)
-
-    def describe(self) -> dict[str, Any]:
-        R = self.base2world[:3, :3]
-        return {
-            "source": self.source,
-            "translation_m": self.base2world[:3, 3].tolist(),
-            "yaw_deg": math.degrees(math.atan2(R[1, 0], R[0, 0])),
-            "rotation": R.tolist(),
-        }
-
-
-@dataclass
-class Analysis:
-    """Everything one run computed; ``take`` is None when the IK or timing stage failed."""
-
-    shot: Shot
-    robot: Robot
-    placement: Placement
-    targets: Array  # (n, 4, 4) camera2base
-    path: PathSolution | None = None
-    take: Take | None = None
-    timings: dict[str, float] = field(default_factory=dict)
-    collision: dict[str, Any] | None = None  # what the collision check found, if it ran
 
 
 MAX_DISTANCE_M = 1.0e6
@@ -187,7 +143,10 @@ def analyse(
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
         on_start(analysis)
-    progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
+    if (options.objective or robot.ik.objective) == "paper":  # frame by frame: a bar
+        progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
+    else:  # the whole shot in a few large steps: a bar would sit at 0% and jump to 100%
+        progress.stage("solve (whole shot)")
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
         analysis.path = solve_path_report(
@@ -326,7 +285,7 @@ def take_data(analysis: Analysis) -> TakeData:
 def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions) -> dict[str, str]:
     """The ``camtraj`` metadata record (design.md §4)."""
     take, shot, robot = analysis.take, analysis.shot, analysis.robot
-    assert take is not None
+    assert take is not None and analysis.path is not None
     mount = {"camera2flange": robot.camera2flange.tolist()}
     return {
         "source_file": str(shot_path),
@@ -339,19 +298,16 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "mount": json.dumps(mount, sort_keys=True),
         "timing_mode": take.mode,
         "speed_factor": repr(float(take.speed_factor)),
-        "servo_rate_hz": repr(float(take.rate)),
+        "servo_rate_hz": repr(round(float(take.rate), 9)),  # 240.0, not 239.99999999999997
         "max_speed": repr(float(take.report.max_speed)),
         "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
         # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
         "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
         "position_range": json.dumps(take.report.position_range, sort_keys=True),
+        # The margins the terminal prints, for the report of the file.
+        "margins": json.dumps(margins_summary(analysis.path, shot.frames), sort_keys=True),
     }
-
-
-def _axis_value(name: str, value: float) -> float:
-    """SI value for display: degrees for revolute axes, metres otherwise."""
-    return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
 
 
 def run_warnings(analysis: Analysis) -> list[str]:
@@ -398,7 +354,7 @@ def summary(
     def extents(part: dict[str, Any]) -> dict[str, Any]:
         return {
             "duration_s": part.get("duration", 0.0),
-            "extent": {k: _axis_value(k, v) for k, v in part.get("extent", {}).items()},
+            "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.
             "peak_use": part.get("peak_use", {}),
         }
@@ -425,7 +381,7 @@ def summary(
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup),
         "move_to_start": _move_to_start(path),
-        "margins": _margins(path, shot.frames),
+        "margins": margins_summary(path, shot.frames),
         "runout": extents(rep.runout),
         "warnings": warnings,
         "collision": analysis.collision,
@@ -439,25 +395,9 @@ def _move_to_start(path: PathSolution) -> dict[str, Any]:
     m = path.move_to_start
     return {
         "duration_s": m.duration,
-        "start": {k: _axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.start, strict=True)},
-        "extent": {k: _axis_value(k, abs(float(v)))
+        "start": {k: axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.start, strict=True)},
+        "extent": {k: axis_value(k, abs(float(v)))
                    for k, v in zip(JOINT_NAMES, m.travel, strict=True)},
-    }
-
-
-def _margins(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
-    """Smallest distances to the position limits (per axis), the wrist singularity and full
-    stretch over the shot, with the film frame where each occurs (degrees / metres)."""
-    m = path.margins
-    return {
-        "to_limits": {k: _axis_value(k, float(v))
-                      for k, v in zip(JOINT_NAMES, m.to_limits, strict=True)},
-        "to_limits_frame": {k: int(frames[i])
-                            for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)},
-        "wrist_singularity_deg": math.degrees(m.wrist),
-        "wrist_singularity_frame": int(frames[m.wrist_frame]),
-        "full_stretch_deg": math.degrees(m.stretch),
-        "full_stretch_frame": int(frames[m.stretch_frame]),
     }
 
 

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from camtraj import interrupts
 from camtraj.errors import InputError, RobotFileError, ShotFileError
 from camtraj.options import ConvertOptions
 
@@ -144,7 +145,8 @@ def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
     Uses ``UsdUtils.ComputeAllDependencies``. A shot USD cannot open gives an empty list
     (reading it reports the error); USD's diagnostics are kept off stderr.
     """
-    from pxr import Sdf, Tf, UsdUtils
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from pxr import Sdf, Tf, UsdUtils  # (UsdUtils loads UsdShade and Sdr: ~0.1 s)
 
     root = os.path.realpath(shot)
     trap_type = getattr(Tf, "DiagnosticTrap", None)

@@ -12,17 +12,33 @@ Such code runs inside :func:`deferred`: a signal there is only recorded, and rai
 block ends. :func:`check` raises a recorded stop (the outputs commit calls it first), so a
 stop that some library swallowed still stops the run. Only the first signal raises; a second
 Ctrl-C during the clean-up is recorded and does not interrupt it.
+
+Once the outputs are committed (:func:`ignore_from_now`) both signals are ignored by the
+operating system, so one arriving while the process exits (when Python has put the default
+handlers back) cannot kill a run whose result is on disk: it ends with its own exit code.
+
+This module imports nothing but :mod:`signal`: the command line installs it before any other
+import, so that a signal in its first milliseconds is handled too.
 """
 
 from __future__ import annotations
 
-import contextlib
 import signal
-import threading
-from collections.abc import Iterator
-from types import FrameType
 
-__all__ = ["Interrupted", "check", "deferred", "ignore_from_now", "install", "requested"]
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from types import FrameType, TracebackType
+
+__all__ = [
+    "Interrupted",
+    "check",
+    "deferred",
+    "ignore",
+    "ignore_from_now",
+    "install",
+    "requested",
+]
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -69,11 +85,25 @@ def _handler(signum: int, frame: FrameType | None) -> None:
 
 
 def install() -> None:
-    """Handle SIGINT and SIGTERM as described above (main thread only; else nothing)."""
-    if threading.current_thread() is not threading.main_thread():
-        return
+    """Handle SIGINT and SIGTERM as described above, for a new run (main thread only).
+
+    Forgets any earlier run's state: a ``batch`` worker calls it for each shot.
+    """
+    _state.pending, _state.raised, _state.depth, _state.ignoring = None, False, 0, False
+    _set_handlers(_handler)
+
+
+def ignore() -> None:
+    """Ignore SIGINT and SIGTERM (main thread only); a ``batch`` worker between shots."""
+    _set_handlers(signal.SIG_IGN)
+
+
+def _set_handlers(handler: signal.Handlers | Callable[[int, FrameType | None], None]) -> None:
     for signum in SIGNALS:
-        signal.signal(signum, _handler)
+        try:
+            signal.signal(signum, handler)
+        except ValueError:  # not the main thread: signals are the main thread's business
+            return
 
 
 def requested() -> int | None:
@@ -88,23 +118,33 @@ def check() -> None:
         raise Interrupted(_state.pending)
 
 
-@contextlib.contextmanager
-def deferred(*, raise_pending: bool = True) -> Iterator[None]:
+class deferred:  # noqa: N801 - used as a function: ``with interrupts.deferred():``
     """Record, rather than raise, a signal during the block; raise it when the block ends.
 
     Args:
         raise_pending: Raise a stop requested before or during the block when it ends
             (unless one was raised already). False for clean-up code.
     """
-    _state.depth += 1
-    try:
-        yield
-    finally:
+
+    def __init__(self, *, raise_pending: bool = True) -> None:
+        self.raise_pending = raise_pending
+
+    def __enter__(self) -> None:
+        _state.depth += 1
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         _state.depth -= 1
-    if raise_pending and _state.depth == 0 and not _state.raised:
-        check()
+        if exc_type is None and self.raise_pending and _state.depth == 0 and not _state.raised:
+            check()
 
 
 def ignore_from_now() -> None:
-    """The run's result is committed: later signals no longer stop it."""
+    """The run's result is committed: later signals no longer stop it, nor kill it.
+
+    (The operating system ignores them only where :func:`install` installed the handlers: a
+    library caller keeps its own.)
+    """
     _state.ignoring = True
+    if signal.getsignal(signal.SIGINT) is _handler:
+        ignore()

@@ -415,8 +415,12 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
     """One CameraInfo per film frame, stamped at its take time, in the optical frame."""
     assert take.horizontal_aperture_mm is not None and take.vertical_aperture_mm is not None
     n = len(take.frame_times)
+    # One image size for the take (the first frame's aspect); an animated film back changes
+    # the intrinsics, not the size.
+    height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
+                               IMAGE_WIDTH)[0]) if n else 1
     K = camera_matrices(take.focal_length_mm, take.horizontal_aperture_mm,
-                        take.vertical_aperture_mm, IMAGE_WIDTH)
+                        take.vertical_aperture_mm, IMAGE_WIDTH, height)
     P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
     tpl = _Cdr()
     tpl.slot_time("stamp")
@@ -433,7 +437,7 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
     tpl.buf += b"\x00"  # roi.do_rectify: false
     values: dict[str, ArrayLike] = {
         **_stamp_values("stamp", seconds_to_ns(take.frame_times)),
-        "height": image_heights(take.horizontal_aperture_mm, take.vertical_aperture_mm),
+        "height": np.full(n, height),
         "width": np.full(n, IMAGE_WIDTH),
         "d": np.zeros((n, 5)),
         "k": K.reshape(n, 9),

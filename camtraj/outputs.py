@@ -12,16 +12,23 @@ else a command writes). Each path is checked when it is added, before any solvin
 * no two outputs are the same file.
 
 Content goes to temporary files in the destination folders. On Linux these are unnamed
-(``O_TMPFILE``): a run killed at any moment, even with SIGKILL, leaves nothing behind. Where
-unnamed files are not supported the temporary file is ``.NAME.camtraj-tmp-HOST-PID``; a later
-run writing NAME (and ``camtraj batch`` for its folder) removes such files when their process
-is gone (:func:`remove_stale_temps`).
+(``O_TMPFILE``): a run killed before its commit, even with SIGKILL, leaves nothing behind.
+Where unnamed files are not supported the temporary file is ``.NAME.camtraj-tmp-HOST-PID``
+from the start.
 
-:meth:`OutputSet.commit` fsyncs every temporary file, gives each a name next to its
-destination, then renames them over the destinations one after the other; if a rename fails
-the destinations already replaced get their earlier content back. So either every output is
-replaced or none is. Signals (SIGINT, SIGTERM) are held off during the commit: a stop
-requested before it means nothing is written; once it has started the run completes.
+:meth:`OutputSet.commit` fsyncs every temporary file. An output whose destination does not
+exist is then linked into place directly (``linkat``): it never has another name. An output
+replacing a file needs a name to be renamed over it: it gets ``.NAME.camtraj-tmp-HOST-PID``,
+the file it replaces is kept as ``.NAME.camtraj-old-HOST-PID``, and the renames follow one
+after the other; if one fails the destinations already replaced get their earlier content
+back. So either every output is replaced or none is. Signals (SIGINT, SIGTERM) are held off
+during the commit: a stop requested before it means nothing is written; once it has started
+the run completes.
+
+What SIGKILL (or a power cut) can leave: killed inside the commit (a few milliseconds), the
+``-tmp-``/``-old-`` names of outputs that replace an existing file, and some outputs replaced
+while others are not. A later run writing NAME (and ``camtraj batch`` for its folder) removes
+such files when their process is gone (:func:`remove_stale_temps`).
 
 Usage::
 
@@ -334,21 +341,30 @@ class OutputSet:
                 msg = f"cannot write {out.what}: {_reason(exc)}"
                 raise InputError(msg) from None
             self._check_destination(out)  # still a regular file or nothing
+        # An unnamed file whose destination does not exist yet is linked there directly: it
+        # never has another name. Every other output gets a temporary name, renamed over its
+        # destination (whose earlier content is kept under a second name until the end).
+        direct = {id(o) for o in self._outputs
+                  if o.named is None and not os.path.lexists(o.target)}
         for out in self._outputs:
-            if out.named is None:
-                self._name_temp(out)
+            if out.named is None and id(out) not in direct:
+                self._link(out, out.target.parent / temp_name(out.target.name))
         backups: list[tuple[_Output, Path | None]] = []
         try:
             for out in self._outputs:
-                backups.append((out, self._backup(out)))
+                backups.append((out, None if id(out) in direct else self._backup(out)))
             done: list[tuple[_Output, Path | None]] = []
             for out, backup in backups:
-                assert out.named is not None
                 try:
-                    os.replace(out.named, out.target)
-                except OSError as exc:
+                    if id(out) in direct:
+                        self._link(out, out.target)
+                    else:
+                        assert out.named is not None
+                        os.replace(out.named, out.target)
+                except (OSError, InputError) as exc:
                     self._restore(done)
-                    msg = f"cannot write {out.what}: {_reason(exc)}; nothing was replaced"
+                    reason = _reason(exc) if isinstance(exc, OSError) else str(exc)
+                    msg = f"cannot write {out.what}: {reason}; nothing was replaced"
                     raise InputError(msg) from None
                 out.named = None
                 done.append((out, backup))
@@ -361,10 +377,12 @@ class OutputSet:
             _fsync_dir(folder)
 
     @staticmethod
-    def _name_temp(out: _Output) -> None:
-        named = out.target.parent / temp_name(out.target.name)
-        with contextlib.suppress(FileNotFoundError):
-            named.unlink()
+    def _link(out: _Output, named: Path) -> None:
+        """Give the unnamed temporary file of ``out`` the name ``named`` (which must be free,
+        but for a stale temporary file of ours)."""
+        if named != out.target:
+            with contextlib.suppress(FileNotFoundError):
+                named.unlink()
         try:
             # linkat(AT_SYMLINK_FOLLOW) on /proc/self/fd/N names an O_TMPFILE file; os.link
             # only calls linkat (not link, which would not follow) when given a dir fd.
@@ -373,10 +391,14 @@ class OutputSet:
                 os.link(f"/proc/self/fd/{out.fd}", named, src_dir_fd=root, follow_symlinks=True)
             finally:
                 os.close(root)
+        except FileExistsError:
+            msg = f"cannot write {out.what}: another program created it during the run"
+            raise InputError(msg) from None
         except OSError as exc:
             msg = f"cannot write {out.what}: {_reason(exc)}"
             raise InputError(msg) from None
-        out.named = named
+        if named != out.target:
+            out.named = named
 
     @staticmethod
     def _backup(out: _Output) -> Path | None:

@@ -36,7 +36,7 @@ from camtraj.errors import CamtrajError, InputError, PlacementError, Unreachable
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
-from camtraj.set_file import SetFile, floor_xy
+from camtraj.set_file import SetFile, floor_polygon
 from camtraj.timing import Limits, TimingLimitError, time_shot
 
 Array = NDArray[np.float64]
@@ -338,9 +338,11 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
     sub = pts[::stride]
     check_can_reach(env, pts, problem.base_z)
 
-    region = None if set_file.region is None else floor_xy(set_file.region, meters_per_unit,
-                                                             up_axis)
-    keep_out = [floor_xy(p, meters_per_unit, up_axis) for p in set_file.keep_out]
+    src = set_file.source
+    region = None if set_file.region is None else floor_polygon(
+        set_file.region, meters_per_unit, up_axis, src, "floor.region")
+    keep_out = [floor_polygon(p, meters_per_unit, up_axis, src, f"floor.keep_out[{i}]")
+                for i, p in enumerate(set_file.keep_out)]
     reach = env.reach + env.offset + max(abs(env.axis_lo), abs(env.axis_hi))
     lo, hi = pts[:, :2].min(axis=0) - reach, pts[:, :2].max(axis=0) + reach
     if region is not None:

@@ -1,21 +1,21 @@
 """ROS 2 facts the MCAP writer needs: QoS profiles, CameraInfo intrinsics, camtraj's messages.
 
 **QoS.** Every channel carries ``offered_qos_profiles``, the YAML that rosbag2 stores per topic
-(a list with one profile). It is written in rosbag2's integer form (metadata version 8, as
-Humble writes it): a rosbag2 that finds no ``rosbag2`` metadata record in an MCAP reads the
-profiles as version 8, whose decoder wants integers for reliability, durability and liveliness
-(newer rosbag2 writes names, but only together with that record). Durations are 0 s 0 ns,
-"unspecified" (rmw's defaults). Latched topics (``/tf_static``, ``/robot_description``) are
-offered ``transient_local`` with depth 1, so a subscriber that joins late still gets them;
-every other topic is ``volatile`` with depth 10. All are reliable and keep_last.
+(a list with one profile). It is written in rosbag2's metadata version 8 form, as Humble
+writes it, with integers for reliability, durability and liveliness (the tests read it back
+with the ``rosbags`` library). Durations are 0 s 0 ns, "unspecified" (rmw's defaults).
+Latched topics (``/tf_static``, ``/robot_description``, ``/joint_trajectory``) are
+``transient_local`` with depth 1, so a subscriber that joins late still gets them; every other
+topic is ``volatile`` with depth 10. All are reliable and keep_last.
 
-**CameraInfo.** The pinhole intrinsics of a USD lens at a chosen image width (default 1920
-px) and the height of the film back's aspect: ``width`` px across ``horizontalAperture``, so
-``fx = focal length / horizontal aperture * width`` and ``fy = focal length / vertical
-aperture * height`` [px], the principal point at the image centre (aperture offsets are not
-read). No distortion (``plumb_bob`` with zeros), R = identity, P = [K | 0]. The message is in
-the camera's ROS optical frame ``camera_optical`` (z forward, y down), which is what Foxglove
-draws a frustum from.
+**CameraInfo.** The pinhole intrinsics of a USD lens at a chosen image width (default 1920 px)
+and the height of the film back's aspect at the first frame, fixed for the take (an animated
+film back changes the intrinsics, not the image size): ``width`` px across
+``horizontalAperture``, so ``fx = focal length / horizontal aperture * width`` and ``fy = focal
+length / vertical aperture * height`` [px], the principal point at the image centre (aperture
+offsets are not read). No distortion (``plumb_bob`` with zeros), R = identity, P = [K | 0]. The
+message is in the camera's ROS optical frame ``camera_optical`` (z forward, y down), which is
+what Foxglove draws a frustum from.
 
 **Foxglove layout.** ``camtraj/data/foxglove_layout.json`` (``camtraj convert
 --foxglove-layout FILE.json`` writes a copy): a 3-D panel in the ``world`` frame with the URDF
@@ -49,8 +49,9 @@ __all__ = [
 IMAGE_WIDTH = 1920
 """Image width [px] of the CameraInfo; the height follows the film back's aspect."""
 
-LATCHED_TOPICS = frozenset({"/tf_static", "/robot_description"})
-"""Topics offered transient_local: published once, kept for late subscribers."""
+LATCHED_TOPICS = frozenset({"/tf_static", "/robot_description", "/joint_trajectory"})
+"""Topics offered transient_local: published once, kept for late subscribers (a controller
+that connects after ``ros2 bag play`` starts still gets the whole trajectory)."""
 
 # rmw enum values (rmw/types.h), the integers of rosbag2's version-8 QoS YAML.
 _KEEP_LAST = 1
@@ -93,6 +94,7 @@ def camera_matrices(
     horizontal_aperture_mm: ArrayLike,
     vertical_aperture_mm: ArrayLike,
     width: int = IMAGE_WIDTH,
+    height: int | None = None,
 ) -> Array:
     """Pinhole camera matrices K [px] per frame, shape (n, 3, 3).
 
@@ -100,12 +102,15 @@ def camera_matrices(
         focal_length_mm: (n,) focal length [mm].
         horizontal_aperture_mm: (n,) film back width [mm].
         vertical_aperture_mm: (n,) film back height [mm].
-        width: Image width [px]; the height is :func:`image_heights`.
+        width: Image width [px].
+        height: Image height [px] for every frame; default the first frame's
+            :func:`image_heights` (one image size for the take).
     """
     f = np.asarray(focal_length_mm, dtype=float)
     h = np.asarray(horizontal_aperture_mm, dtype=float)
     v = np.asarray(vertical_aperture_mm, dtype=float)
-    height = image_heights(h, v, width)
+    if height is None:
+        height = int(image_heights(h[:1], v[:1], width)[0]) if h.size else 1
     K = np.zeros((len(f), 3, 3))
     K[:, 0, 0] = f / h * width
     K[:, 1, 1] = f / v * height

@@ -155,6 +155,35 @@ def floor_xy(points: Array, meters_per_unit: float, up_axis: str) -> Array:
     return p[:, :2].copy()
 
 
+MAX_FLOOR_M = 1.0e6
+"""Largest floor coordinate of a region or keep-out polygon [m] (1000 km: a unit error)."""
+
+
+def floor_polygon(points: Array, meters_per_unit: float, up_axis: str, source: str,
+                  key: str) -> Array:
+    """A region or keep-out polygon on the floor (k, 2) [m] (:func:`floor_xy`), checked.
+
+    Raises:
+        InputError: A coordinate beyond :data:`MAX_FLOOR_M`, or the polygon is not simple
+            (it crosses itself, like a bow tie) or has no area.
+    """
+    import shapely
+
+    xy = floor_xy(points, meters_per_unit, up_axis)
+    table, _, name = key.partition(".")
+    if not np.all(np.abs(xy) <= MAX_FLOOR_M):
+        msg = (f"{source}: [{table}] {name} has a point beyond {MAX_FLOOR_M:.0e} m from the "
+               "origin (a unit error?)")
+        raise InputError(msg)
+    polygon = shapely.Polygon(xy)
+    if not polygon.is_valid or polygon.area <= 0.0:
+        why = shapely.is_valid_reason(polygon) if polygon.area > 0.0 else "it has no area"
+        msg = (f"{source}: [{table}] {name} is not a simple polygon on the floor ({why}); "
+               "give its corners in order around it, without crossing")
+        raise InputError(msg)
+    return xy
+
+
 def to_toml(base2world: Array, raw: dict[str, Any]) -> str:
     """A set file: ``raw``'s tables as they were, with ``[placement]`` replaced by ``base2world``.
 

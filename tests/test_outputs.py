@@ -255,3 +255,63 @@ def test_batch_removes_stale_temporary_files_in_its_folder(tmp_path: Path) -> No
     report = run_batch([str(tmp_path / "missing.usda")], tmp_path, options=ConvertOptions())
     assert report.exit_code == 2
     assert _names(tmp_path) == [REPORT_NAME]
+
+
+_KILLED_IN_COMMIT = """
+import os, signal, sys
+from camtraj import outputs
+folder, at = sys.argv[1], int(sys.argv[2])
+calls = 0
+def killing(real):
+    def call(*args, **kwargs):
+        global calls
+        calls += 1
+        if calls == at:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(*args, **kwargs)
+    return call
+names = ["a.mcap", "b.json", "c.usda"]
+out = outputs.OutputSet()
+for name in names:
+    out.add(os.path.join(folder, name))
+    out.write_bytes(os.path.join(folder, name), b"new " + name.encode())
+for name in ("link", "replace", "unlink"):  # every file system call of the commit
+    setattr(outputs.os, name, killing(getattr(os, name)))
+out.commit()
+print(calls)
+"""
+
+
+@pytest.mark.parametrize("existing", [(), ("b.json",)])
+def test_sigkill_inside_the_commit(tmp_path: Path, existing: tuple[str, ...]) -> None:
+    """SIGKILL at each file system call of the commit (issue 14, §4): outputs that did not
+    exist are linked straight into place, so with no earlier file nothing else is ever left;
+    an output replacing a file may leave its ``-tmp-``/``-old-`` names, which the next run
+    writing it removes."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
+    at = 1
+    while True:
+        folder = tmp_path / f"k{at}"
+        folder.mkdir()
+        for name in existing:
+            (folder / name).write_bytes(b"old")
+        proc = subprocess.run([sys.executable, "-c", _KILLED_IN_COMMIT, str(folder), str(at)],
+                              capture_output=True, env=env, check=False)
+        left = sorted(p.name for p in folder.iterdir())
+        if proc.returncode == 0:  # fewer calls than ``at``: all of them were tried
+            assert left == ["a.mcap", "b.json", "c.usda"]
+            break
+        assert proc.returncode == -9, proc.stderr
+        finals = [n for n in left if not n.startswith(".")]
+        assert set(finals) <= {"a.mcap", "b.json", "c.usda"}
+        for name in finals:
+            assert (folder / name).read_bytes() in (b"old", b"new " + name.encode())
+        stale = [n for n in left if n.startswith(".")]
+        if not existing:
+            assert stale == [], at
+        assert all(n.startswith(".b.json.camtraj-") for n in stale), stale
+        with OutputSet() as again:  # the next run writing b.json
+            again.add(folder / "b.json")
+        assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []
+        at += 1
+    assert at > 3

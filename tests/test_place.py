@@ -266,3 +266,37 @@ def test_a_shot_no_placement_can_do_is_exit_3_with_the_reason(
     for w in words:
         assert w in proc.stderr
     assert not (tmp_path / "p.toml").exists()
+
+
+@pytest.mark.parametrize(("region", "why"), [
+    ([[0, 0, 0], [10, 0, 10], [10, 0, 0], [0, 0, 10]], "not a simple polygon"),  # a bow tie
+    ([[-1e300, 0, -1e300], [1e300, 0, -1e300], [1e300, 0, 1e300]], "a unit error"),
+    ([[0, 0, 0], [5, 0, 0], [10, 0, 0]], "no area"),
+])
+def test_a_floor_region_that_is_no_region_is_bad_input(
+        far: dict[str, Any], region: list[list[float]], why: str) -> None:
+    """Not "no placement" (exit 3): the set file is wrong, exit 2 naming the key (issue 14)."""
+    set_file = far["dir"] / "bad_region.toml"
+    set_file.write_text(f"[floor]\nregion = {json.dumps(region)}\n")
+    proc = run("place", far["shot"], "--set-file", set_file, "-j", "1")
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ERROR:"), proc.stderr
+    assert "[floor] region" in lines[0] and why in lines[0], lines[0]
+
+
+def test_many_keep_outs_give_what_each_one_tested_alone_gives(robot: Robot) -> None:
+    """20,000 keep-out triangles (tested together through a tree) against the one-by-one
+    shapely test of each rail footprint (issue 14)."""
+    from camtraj.reach import floor_ok, rail_footprints
+
+    rng = np.random.default_rng(0)
+    centres = rng.uniform(-300, 300, (20_000, 1, 2))
+    triangles = list(centres + rng.uniform(-0.1, 0.1, (20_000, 3, 2)))
+    x, y, yaw = rng.uniform(-300, 300, 300), rng.uniform(-300, 300, 300), rng.uniform(0, 360, 300)
+    ok = floor_ok(robot, x, y, yaw, None, triangles)
+    rails = [shapely.Polygon(r) for r in rail_footprints(robot, x, y, yaw)]
+    union = shapely.union_all([shapely.Polygon(t) for t in triangles])
+    expected = np.array([not rail.intersects(union) for rail in rails])
+    assert 0 < ok.sum() < len(ok)
+    np.testing.assert_array_equal(ok, expected)

@@ -193,7 +193,7 @@ def test_both_sources_render_the_same_report(runs: Runs) -> None:
     assert summary_rows.findall(conv) == summary_rows.findall(rep)
     cells = re.compile(r"<td class='num[^']*'>([^<]+)</td>")
     a, b = cells.findall(conv), cells.findall(rep)
-    assert len(a) == len(b) == 8 * 6
+    assert len(a) == len(b) == 8 * (6 + 2)  # margins table, then nearest position limits
     for x, y in zip(a, b, strict=True):
         if x.endswith("%"):  # jerk: exact in memory, by differences from the file
             assert abs(int(x[:-1]) - int(y[:-1])) <= 1, (x, y)
@@ -441,3 +441,154 @@ def test_cli_help_lists_the_report(runs: Runs) -> None:
     for args in (["report", "--help"], ["convert", "--help"], ["check", "--help"]):
         proc = run_cli(*args)
         assert proc.returncode == 0 and "REPORT.html" in proc.stdout
+
+
+# --------------------------------------------------------------------------------------------
+# What the crew reads (issue 15, §2): labels apart, per-span peaks, margins, the track, rounding
+# --------------------------------------------------------------------------------------------
+
+_BOXES_SCRIPT = """<script>
+const out = [];
+document.querySelectorAll('svg').forEach((svg, i) => {
+  const s = svg.getBoundingClientRect();
+  svg.querySelectorAll('text').forEach(t => {
+    const r = t.getBoundingClientRect();
+    if (t.textContent.trim()) out.push({svg: i, text: t.textContent, box: [r.left, r.top,
+      r.right, r.bottom], frame: [s.left, s.top, s.right, s.bottom]});
+  });
+});
+const pre = document.createElement('pre'); pre.id = 'boxes';
+pre.textContent = JSON.stringify(out); document.body.appendChild(pre);
+</script>"""
+
+
+def text_boxes(page: str, folder: Path) -> list[dict[str, object]]:
+    """The browser's bounding box of every SVG text of ``page`` (a copy with a script that
+    measures them; the page itself has none), from headless Chromium's DOM."""
+    exe = chromium()
+    if exe is None:
+        pytest.skip("headless Chromium is not installed (Debian: apt-get install chromium, "
+                    "or `make chromium`)")
+    copy = folder / "measured.html"
+    copy.write_text(page.replace("</body>", _BOXES_SCRIPT + "</body>"), encoding="utf-8")
+    with tempfile.TemporaryDirectory(prefix="camtraj-chromium-") as profile:
+        proc = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+             f"--user-data-dir={profile}", f"--window-size={WINDOW[0]},{WINDOW[1]}",
+             "--dump-dom", copy.resolve().as_uri()],
+            capture_output=True, text=True, timeout=300, check=False)
+    found = re.search(r'<pre id="boxes">(.*?)</pre>', proc.stdout, re.DOTALL)
+    assert found, f"chromium measured nothing:\n{proc.stderr[-2000:]}"
+    import html
+
+    boxes: list[dict[str, object]] = json.loads(html.unescape(found.group(1)))
+    return boxes
+
+
+@pytest.mark.parametrize("name", ["convert", "whip", "unreachable"])
+def test_no_svg_text_overlaps_another_or_is_cut_off(runs: Runs, name: str) -> None:
+    boxes = text_boxes(runs.html(name), runs.folder)
+    assert len(boxes) > 40
+    tol = 0.5  # px
+    for i, a in enumerate(boxes):
+        ax0, ay0, ax1, ay1 = a["box"]  # type: ignore[misc]
+        fx0, fy0, fx1, fy1 = a["frame"]  # type: ignore[misc]
+        assert fx0 - tol <= ax0 and ax1 <= fx1 + tol and fy0 - tol <= ay0 and ay1 <= fy1 + tol, a
+        for b in boxes[i + 1:]:
+            if b["svg"] != a["svg"]:
+                continue
+            bx0, by0, bx1, by1 = b["box"]  # type: ignore[misc]
+            overlap = min(ax1, bx1) - max(ax0, bx0) > tol and min(ay1, by1) - max(ay0, by0) > tol
+            assert not overlap, (a["text"], b["text"])
+
+
+def test_each_violation_span_is_labelled_with_its_own_peak(runs: Runs) -> None:
+    """A violation over several runs of frames: each label gives the peak of its own run (the
+    largest of them the whole violation's peak), never more."""
+    page = runs.html("whip")
+    whole = {(v["axis"], v["quantity"]): v["ratio"]
+             for v in json.loads(runs.procs["whip"].stdout)["violations"]}
+    label = re.compile(rf"(\w+) ([\d.]+){rp.plots.TIMES} limit, frames? (\d+)(?:-(\d+))?")
+    several = 0
+    for root in svgs(page):
+        axes = [el.get("id", "") for el in root.iter() if el.get("id", "").endswith("-axes")]
+        if not axes:
+            continue
+        axis = axes[0].removesuffix("-axes")
+        texts = ["".join(t.itertext()) for t in root.iter(f"{SVG_NS}text")]
+        peaks: dict[str, list[float]] = {}
+        for quantity, ratio, _a, _b in (m.groups() for t in texts if (m := label.search(t))):
+            peaks.setdefault(quantity, []).append(float(ratio))
+        for quantity, found in peaks.items():
+            peak = whole[(axis, quantity)]
+            assert max(found) == pytest.approx(peak, rel=5e-3), (axis, quantity, found)
+            assert all(r <= peak * 1.005 for r in found)
+            if len(found) > 1 and min(found) < 0.8 * peak:
+                several += 1
+    assert several >= 1  # the whip pan has a violation whose runs peak differently
+
+
+def test_feasible_report_gives_the_terminal_margins(runs: Runs) -> None:
+    summary = json.loads((runs.folder / "maya.json").read_text())
+    m = summary["margins"]
+    for name in ("convert", "report"):  # in memory and from the MCAP
+        page = runs.html(name)
+        rows = dict(re.findall(r"<tr><td>(\w+)</td><td class='num'>([^<]+)</td>"
+                               r"<td class='num'>\d+</td></tr>", page))
+        assert set(rows) == set(JOINT_NAMES)
+        for axis in JOINT_NAMES:
+            unit = "deg" if axis not in ("track", "extend") else "m"
+            assert rows[axis] == f"{m['to_limits'][axis]:.3f} {unit}"
+        frames = re.findall(r"<tr><td>(\w+)</td><td class='num'>[^<]+</td>"
+                            r"<td class='num'>(\d+)</td></tr>", page)
+        assert {a: int(f) for a, f in frames} == m["to_limits_frame"]
+        assert (f"wrist singularity {m['wrist_singularity_deg']:.1f} deg (frame "
+                f"{m['wrist_singularity_frame']})") in page
+        assert f"full stretch {m['full_stretch_deg']:.1f} deg" in page
+
+
+def test_the_track_bar_spans_the_track_limits(robot: Robot) -> None:
+    """The bar's ends are where the carriage stands at the track's limits, less the carriage's
+    constant offset from the track value (FK at both limits)."""
+    q = np.radians([0.0, 30.0, 10.0, 0.0, -40.0, 10.0, 5.0, 0.0])
+    q[0], q[3] = 3.0, 0.5
+    ends = rp.data.track_ends(robot.link_frames(q[None])[0], float(q[0]),
+                              float(robot.lower[0]), float(robot.upper[0]))
+    offset = robot.link_frames(np.zeros((1, 8)))[0, 1, :3, 3]  # carriage at track value 0
+    for k, limit in enumerate((robot.lower[0], robot.upper[0])):
+        at = q.copy()
+        at[0] = limit
+        carriage = robot.link_frames(at[None])[0, 1, :3, 3]
+        np.testing.assert_allclose(ends[k] + offset, carriage, atol=1e-12)
+    np.testing.assert_allclose(ends[:, 0], [robot.lower[0], robot.upper[0]], atol=1e-12)
+
+
+def test_report_and_terminal_print_the_same_numbers(tmp_path: Path) -> None:
+    """check's table and the report of the same run: limit use, take, run-up and run-out."""
+    html = tmp_path / "r.html"
+    proc = run_cli("check", SHOTS / "blender_crane_up.usda", "--timing", "scale",
+                   "--report", html)
+    assert proc.returncode == 0, proc.stderr
+    page = html.read_text(encoding="utf-8")
+    out = proc.stdout
+    table = {ln.split()[0]: ln.split()[1:5] for ln in out.splitlines()
+             if ln.split() and ln.split()[0] in JOINT_NAMES}
+    cells = re.findall(r"<td><a href='#axis-(\w+)'>\w+</a></td>((?:<td class='num[^']*'>"
+                       r"[^<]+</td>){4})", page)
+    assert len(cells) == 8
+    for axis, row in cells:
+        assert re.findall(r">([^<]+)<", row) == table[axis], axis
+    take = re.search(r"take (\S+) s \(shot (\S+)-(\S+) s\)", out)
+    assert take and f"{take[1]} s; shot {take[2]}-{take[3]} s" in page
+    ends = re.search(r"run-up (\S+) s, run-out (\S+) s", out)
+    assert ends and f"{ends[1]} s / {ends[2]} s" in page
+    speed = re.search(r"maximum feasible speed (\d+%) of real time", out)
+    assert speed and f"{speed[1]} of real time" in page
+
+
+def test_durations_and_use_round_one_way() -> None:
+    from camtraj.shown import percent, seconds
+
+    assert seconds(0.0449999999) == seconds(0.0450000001) == "0.05"
+    assert seconds(0.04) == "0.04" and seconds(5.165) == "5.17"
+    assert percent(0.995) == "100%" and percent(0.994) == "99%" and percent(math.nan) == "-"

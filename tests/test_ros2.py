@@ -36,7 +36,7 @@ SHOTS = ROOT / "samples" / "shots"
 PACKAGE = ROOT / "ros" / "camtraj_msgs"
 MSG_FILE = PACKAGE / "msg" / "ShotFrame.msg"
 PLACEMENT = (0.1, 0.05, 0.0, 5.0)  # x, y, z [m], yaw [deg]
-LATCHED = {"/tf_static", "/robot_description"}
+LATCHED = {"/tf_static", "/robot_description", "/joint_trajectory"}
 DELIMITER = "\n" + "=" * 80 + "\n"
 
 
@@ -281,3 +281,39 @@ def test_foxglove_layout_is_written_beside_the_mcap(tmp_path: Path) -> None:
     )  # fmt: skip
     assert bad.returncode == 2
     assert not (tmp_path / "b.mcap").exists()
+
+
+def test_animated_film_back_keeps_one_image_size(tmp_path: Path) -> None:
+    """The film back's height animates (1190 to 1440 px worth): the image size stays the first
+    frame's and fy follows the lens, frame by frame (pxr reads the lens independently)."""
+    shot = tmp_path / "shot.usda"
+    stage = Usd.Stage.Open(str(SHOTS / "blender_crane_up.usda"))
+    stage.GetRootLayer().Export(str(shot))
+    stage = Usd.Stage.Open(str(shot))
+    [cam] = [UsdGeom.Camera(p) for p in stage.Traverse() if p.IsA(UsdGeom.Camera)]
+    first, last = int(stage.GetStartTimeCode()), int(stage.GetEndTimeCode())
+    attr = cam.GetVerticalApertureAttr()
+    v0 = attr.Get(Usd.TimeCode(first))
+    for tc in range(first, last + 1):
+        attr.Set(v0 * (1.0 + 0.2 * (tc - first) / (last - first)), Usd.TimeCode(tc))
+    stage.GetRootLayer().Save()
+    convert(shot, tmp_path / "shot.mcap", ConvertOptions())
+    messages, _ = read_all(tmp_path / "shot.mcap")
+    infos = messages["/camera/camera_info"]
+    assert len(infos) == last - first + 1
+    mm = UsdGeom.GetStageMetersPerUnit(stage) * 100.0
+    h0 = cam.GetHorizontalApertureAttr().Get(Usd.TimeCode(first)) * mm
+    height = round(1920 * v0 * mm / h0)
+    assert {(i.width, i.height) for i in infos} == {(1920, height)}
+    for tc, info in zip(range(first, last + 1), infos, strict=True):
+        t = Usd.TimeCode(tc)
+        f, v = cam.GetFocalLengthAttr().Get(t) * mm, attr.Get(t) * mm
+        assert info.k[4] == pytest.approx(f / v * height, rel=1e-9)
+        assert info.k[5] == height / 2
+    assert infos[-1].k[4] < infos[0].k[4] / 1.15  # the change is carried by fy
+
+
+def test_servo_rate_metadata_is_the_exact_rate(files: dict[str, Path]) -> None:
+    with files["maya"].open("rb") as stream:
+        md = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
+    assert md["camtraj"]["servo_rate_hz"] == "240.0"

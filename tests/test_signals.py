@@ -17,6 +17,7 @@ be handled, and still leaves nothing (the temporary files are unnamed).
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import pty
@@ -40,6 +41,8 @@ OLD_MCAP, OLD_SUMMARY = b"an earlier, good take\n", b'{"status": "ok"}\n'
 TIMEOUT = 240.0  # s: generous, for a loaded 2-core machine
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGKILL": signal.SIGKILL}
 MOMENTS = ("import", "usd_import", "solve", "write")
+CONSOLE_SCRIPT = "import sys\nfrom camtraj.__main__ import run\nsys.exit(run())\n"
+"""What the ``camtraj`` console script that pip writes runs."""
 
 
 @pytest.fixture(scope="module")
@@ -199,3 +202,143 @@ def test_ctrl_c_during_the_usd_import_is_not_swallowed(
         assert (code, err) == (130, "ERROR: stopped by SIGINT; nothing was written\n")
         assert run.out.read_bytes() == OLD_MCAP
         assert sorted(p.name for p in folder.iterdir()) == ["take.mcap", "take.summary.json"]
+
+
+def _committed(run: Run) -> bool:
+    try:
+        return run.out.read_bytes() != OLD_MCAP and run.summary.read_bytes() != OLD_SUMMARY
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_after_the_commit_lets_the_run_finish(
+    shots: dict[str, Path], tmp_path: Path, name: str
+) -> None:
+    """Sent again and again from the moment both outputs are replaced until the process has
+    ended, so some arrive while Python shuts down (issue 14, §4)."""
+    for attempt in range(2):
+        folder = tmp_path / f"a{attempt}"
+        folder.mkdir()
+        run = Run(shots["part"], folder, "-q")
+        try:
+            run.wait_for(lambda run=run: _committed(run), "the commit", 0.0005)  # type: ignore[misc]
+            while run.proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    run.proc.send_signal(SIGNALS[name])
+                time.sleep(0.0005)
+            code, err = run.finish()
+        finally:
+            if run.proc.poll() is None:
+                run.proc.kill()
+                run.proc.wait()
+        assert (code, err) == (0, ""), f"attempt {attempt}: {err}"
+        assert sorted(p.name for p in folder.iterdir()) == ["take.mcap", "take.summary.json"]
+        assert run.out.read_bytes().startswith(b"\x89MCAP0\r\n")
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_from_the_first_line_of_camtraj_on_gives_one_line(
+    tmp_path: Path, name: str
+) -> None:
+    """From the import of ``camtraj.__main__`` on, at several delays (issue 14, §4).
+
+    ``-X importtime`` reports each finished import on stderr as it happens; the command is
+    started as the ``camtraj`` console script starts it.
+    """
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    script = tmp_path / "camtraj"
+    script.write_text(CONSOLE_SCRIPT)
+    for delay in (0.0, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032):
+        proc = subprocess.Popen(
+            [sys.executable, "-X", "importtime", str(script), "convert",
+             str(tmp_path / "missing.usda"), "-o", str(tmp_path / "x.mcap")],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        assert proc.stderr is not None
+        lines = []
+        while True:
+            line = proc.stderr.readline().decode()
+            assert line, f"no end of Python's start: {lines}"
+            lines.append(line)
+            if line.rstrip().endswith("| camtraj.__main__"):
+                break
+        time.sleep(delay)
+        proc.send_signal(SIGNALS[name])
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+        errors = [ln for ln in err.splitlines() if not ln.startswith("import time:")]
+        assert proc.returncode == 128 + SIGNALS[name], (delay, err)
+        assert errors == [f"ERROR: stopped by {name}; nothing was written"], (delay, err)
+        assert not (tmp_path / "x.mcap").exists()
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (a batch's fork server and its workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        children.setdefault(ppid, []).append(int(entry))
+    found: set[int] = set()
+    todo = [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def _writes_into(pids: set[int], folder: Path) -> bool:
+    """One of ``pids`` has a file open in ``folder`` (a shot's temporary output)."""
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                with contextlib.suppress(OSError):
+                    if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(f"{folder}/"):
+                        return True
+    return False
+
+
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_batch_process_alone_stops_its_shots(
+    shots: dict[str, Path], tmp_path: Path, name: str
+) -> None:
+    """A farm scheduler signals the batch process only, not its workers (issue 14, §4): the
+    running shot stops, the queued ones never start, and nothing is written."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    (folder / "a.mcap").write_bytes(OLD_MCAP)  # an earlier result stays as it was
+    shot_files = []
+    for stem in "abc":
+        shot_files.append(tmp_path / f"{stem}.usda")
+        shot_files[-1].write_bytes(shots["minute"].read_bytes())
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camtraj", "batch", *map(str, shot_files), "-o", str(folder),
+         "-j", "1", "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    start = time.monotonic()
+    workers: set[int] = set()
+    try:
+        while not _writes_into(workers, folder):
+            assert proc.poll() is None, "the batch ended before a shot started"
+            assert time.monotonic() - start < TIMEOUT, "no shot started"
+            workers = _descendants(proc.pid)
+            time.sleep(0.01)
+        proc.send_signal(SIGNALS[name])
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + SIGNALS[name], err
+    assert err.splitlines() == [f"ERROR: stopped by {name}"], err
+    assert sorted(p.name for p in folder.iterdir()) == ["a.mcap"]
+    assert (folder / "a.mcap").read_bytes() == OLD_MCAP
+    while any(Path(f"/proc/{pid}").exists() for pid in workers):  # no worker goes on
+        assert time.monotonic() - start < TIMEOUT, "a worker is still running"
+        time.sleep(0.05)
+    assert sorted(p.name for p in folder.iterdir()) == ["a.mcap"]

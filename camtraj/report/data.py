@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError
 
 if TYPE_CHECKING:
-    from camtraj.convert import Analysis
+    from camtraj.analysis import Analysis
     from camtraj.mcap_io import ReadTake
     from camtraj.options import ConvertOptions
 
@@ -130,6 +130,7 @@ class ReportData:
     warnings: tuple[str, ...] = ()
     tolerance: float = LIMIT_RTOL
     source: str = "convert"
+    margins: dict[str, Any] | None = None  # convert's margins_summary, when the take is done
 
     def limit(self, quantity: str) -> Array:
         """The symmetric limit of velocity, acceleration or jerk, shape (8,)."""
@@ -241,10 +242,12 @@ def _frames_text(frames: tuple[tuple[int, int], ...]) -> str:
 def track_ends(link2base: Array, q_track: float, lower: float, upper: float) -> Array:
     """The track's ends in the base frame, (2, 3), from one pose's link frames (p, 4, 4).
 
-    Frame 1 (the carriage) slides along frame 0's z axis by the track value.
+    The track value is measured along frame 0's z axis from the base origin, so the ends are
+    the base origin plus the limits along that axis (the carriage's frame 1 sits a constant
+    offset further on; ``q_track`` is not needed and kept for the callers).
     """
-    carriage, direction = link2base[1, :3, 3], link2base[0, :3, 2]
-    return np.stack([carriage + (lim - q_track) * direction for lim in (lower, upper)])
+    origin, direction = link2base[0, :3, 3], link2base[0, :3, 2]
+    return np.stack([origin + lim * direction for lim in (lower, upper)])
 
 
 def pose_indices(n: int, k: int = N_POSES) -> IntArray:
@@ -291,6 +294,7 @@ def from_analysis(
         error: The failure, when the shot cannot be done as asked.
         source: The command that ran (shown in the page's footer).
     """
+    from camtraj.analysis import margins_summary
     from camtraj.timing import Limits, TimingLimitError
 
     shot, robot, take, path = analysis.shot, analysis.robot, analysis.take, analysis.path
@@ -319,6 +323,7 @@ def from_analysis(
             qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
             tolerance=LIMIT_RTOL,
+            margins=None if path is None else margins_summary(path, shot.frames),
         )
         return data
     empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, 8) for k in ("q", "qd", "qdd",
@@ -442,10 +447,15 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
     try:
         placement = json.loads(md.get("placement", "{}"))
         warnings = json.loads(md.get("warnings", "[]"))
+        margins = json.loads(md["margins"]) if "margins" in md else None  # older files: none
     except ValueError as exc:
         msg = f"{where} cannot be read ({exc})"
         raise InputError(msg) from None
     _check_placement(placement, f"{where} placement")
+    if margins is not None and not _margins_ok(margins):
+        msg = f"{where} margins must hold to_limits, to_limits_frame (per axis) and the wrist " \
+              "and stretch margins with their frames"
+        raise InputError(msg)
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         msg = f"{where} warnings must be a list of texts"
         raise InputError(msg)
@@ -481,7 +491,7 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
         poses=poses, pose_frames=pose_frames, track=track, warnings=tuple(warnings),
-        tolerance=MCAP_RTOL, source=str(source),
+        tolerance=MCAP_RTOL, source=str(source), margins=margins,
     )
     return _with_violations(data)
 
@@ -522,6 +532,18 @@ def _check_placement(desc: Any, where: str) -> None:
     if not ok:
         msg = f"{where} must hold translation_m (3 numbers), rotation (3x3) and yaw_deg"
         raise InputError(msg)
+
+
+def _margins_ok(m: Any) -> bool:
+    def number(x: Any) -> bool:
+        return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+    return (isinstance(m, dict)
+            and all(isinstance(m.get(k), dict) and len(m[k]) == 8
+                    and all(number(v) for v in m[k].values())
+                    for k in ("to_limits", "to_limits_frame"))
+            and all(number(m.get(k)) for k in ("wrist_singularity_deg", "wrist_singularity_frame",
+                                                "full_stretch_deg", "full_stretch_frame")))
 
 
 def _float(text: str | None) -> float:

@@ -17,6 +17,7 @@ import camtraj
 from camtraj.errors import frame_ranges
 from camtraj.report.data import QUANTITIES, ReportData, fractions
 from camtraj.report.plots import COLORS, figures, limit_text
+from camtraj.shown import percent, seconds, speed_percent
 
 # ---------------------------------------------------------------------------------------------
 # The page
@@ -55,8 +56,7 @@ def _e(text: object) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _floor_pct(x: float) -> str:
-    return f"{math.floor(100.0 * x)}%"
+
 
 
 def _facts(data: ReportData) -> list[tuple[str, str]]:
@@ -73,18 +73,19 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
         rows += [
             ("speed factor", f"{data.speed_factor:.3f} (shot duration in the take / its own)"),
             ("servo rate", f"{data.servo_rate_hz:.1f} Hz"),
-            ("take", f"{data.t[-1] - data.t[0]:.2f} s; shot {data.shot_start:.2f}-"
-                     f"{data.shot_end:.2f} s"),
+            ("take", f"{seconds(data.t[-1] - data.t[0])} s; shot "
+                     f"{seconds(data.shot_start)}-{seconds(data.shot_end)} s"),
         ]
     if math.isfinite(data.max_speed):
         rows.append(("maximum feasible speed",
-                     f"{_floor_pct(data.max_speed)} of real time (could be shot at "
+                     f"{speed_percent(data.max_speed)} of real time (could be shot at "
                      f"{math.floor(100 * data.fps * data.max_speed) / 100:.2f} fps)"))
     elif data.status != "unreachable":
         rows.append(("maximum feasible speed", "not recorded in this file"))
     if data.status == "ok":
         rows.append(("run-up / run-out",
-                     f"{data.shot_start - data.t[0]:.2f} s / {data.t[-1] - data.shot_end:.2f} s"))
+                     f"{seconds(data.shot_start - data.t[0])} s / "
+                     f"{seconds(data.t[-1] - data.shot_end)} s"))
     else:
         rows.append(("run-up / run-out", "not planned: the shot itself cannot be done as asked"))
     return rows
@@ -125,7 +126,7 @@ def _margins_table(data: ReportData) -> str:
         for q in QUANTITIES:
             v = row[q]
             cls = "over" if v > 1 + over else "warn" if v > 0.8 else ""
-            cells.append(f"<td class='num {cls}'>{math.floor(100 * v)}%</td>")
+            cells.append(f"<td class='num {cls}'>{percent(v)}</td>")
         ext = [("-" if not math.isfinite(row[k]) else f"{row[k]:.3f} {row['unit']}")
                for k in ("runup", "runout")]
         lines.append(f"<tr><td><a href='#axis-{_e(row['axis'])}'>{_e(row['axis'])}</a></td>"
@@ -133,7 +134,26 @@ def _margins_table(data: ReportData) -> str:
                      + "</tr>")
     lines.append("</table><p>Peak use of each limit over the shot (first to last film frame); "
                  "position: 0% mid-range, 100% at a bound.</p>")
+    if data.margins is not None:
+        lines.append(_closest_table(data, data.margins))
     return "\n".join(lines)
+
+
+def _closest_table(data: ReportData, m: dict[str, Any]) -> str:
+    """What the terminal's margin column and line say: each axis's nearest approach to a
+    position limit and its frame, the wrist singularity and full stretch margins."""
+    rows = ["<table class='closest'><tr><th>axis</th><th>nearest position limit</th>"
+            "<th>at frame</th></tr>"]
+    for i, name in enumerate(data.joint_names):
+        unit = "deg" if data.revolute[i] else "m"
+        rows.append(f"<tr><td>{_e(name)}</td><td class='num'>{m['to_limits'][name]:.3f} "
+                    f"{unit}</td><td class='num'>{m['to_limits_frame'][name]}</td></tr>")
+    rows.append("</table>")
+    rows.append(f"<p class='closest'>Margin to the wrist singularity "
+                f"{m['wrist_singularity_deg']:.1f} deg (frame {m['wrist_singularity_frame']}), "
+                f"to full stretch {m['full_stretch_deg']:.1f} deg (frame "
+                f"{m['full_stretch_frame']}).</p>")
+    return "\n".join(rows)
 
 
 def render_html(data: ReportData) -> str:

@@ -204,8 +204,9 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
     added: list[Any] = []
     violated = {v.quantity: v for v in data.violations if v.axis == name}
     peak = 1.0
+    curves = {}
     for quantity in QUANTITIES:
-        y = _fraction(data, axis, quantity)
+        y = curves[quantity] = _fraction(data, axis, quantity)
         peak = max(peak, float(np.max(np.abs(y))) if y.size else 0.0)
         te, ye = envelope(data.t, y)
         added += ax.plot(te, ye, color=COLORS[quantity], lw=1.0, zorder=3,
@@ -220,22 +221,87 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
         added.append(ax.axhline(sign, color=_RED if bad else _GREY, lw=1.0 if bad else 0.8,
                                 ls="-" if bad else "--", zorder=2,
                                 gid=f"{name}-limit-{side}"))
-    for row, (quantity, v) in enumerate(violated.items()):
+    labels = []
+    for quantity, v in violated.items():
         for a, b in v.frames:
             ta, tb = _span(data, a, b)
             added.append(ax.axvspan(ta, tb, color=_RED, alpha=0.15, lw=0, zorder=1,
                                     gid=f"{name}-{quantity}-violation-{a}-{b}"))
             label = f"frames {a}-{b}" if b != a else f"frame {a}"
-            added.append(ax.text(
-                0.5 * (ta + tb), 0.96 - 0.11 * row,
-                f"{quantity} {v.ratio:.3g}{TIMES} limit, {label}",
+            ratio = span_peak(data, curves[quantity], a, b, v.ratio)
+            labels.append(ax.text(
+                0.5 * (ta + tb), 0.96, f"{quantity} {ratio:.3g}{TIMES} limit, {label}",
                 transform=ax.get_xaxis_transform(), ha="center", va="top", color=_RED,
                 fontsize=8, fontweight="bold", zorder=6,
+                gid=f"{name}-{quantity}-violation-{a}-{b}-label",
                 bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 0.8}))
+    _place_labels(ax, labels)
+    added += labels
     added.append(ax.text(
         0.0, 1.04, f"{name}  ({'revolute' if data.revolute[axis] else 'prismatic'})",
         transform=ax.transAxes, fontsize=10, fontweight="bold", gid=f"{name}-title"))
     return added
+
+
+def span_peak(data: ReportData, y: Array, a: int, b: int, whole: float) -> float:
+    """The peak of ``|y|`` (× limit) over the servo samples of frames a..b: between the frames
+    before and after the run, as the timing check measures a frame's neighbourhood, and never
+    above the whole violation's peak ``whole``."""
+    fn, ft = data.frame_numbers, data.frame_times
+    lo = float(np.interp(a - 1, fn, ft, left=-np.inf))
+    hi = float(np.interp(b + 1, fn, ft, right=np.inf))
+    inside = (data.t >= lo) & (data.t <= hi)
+    if not np.any(inside):
+        return whole
+    return min(float(np.max(np.abs(y[inside]))), whole)
+
+
+def _renderer(fig: Any) -> Any:
+    """A renderer that measures text as the figure will draw it."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    return canvas.get_renderer()  # type: ignore[no-untyped-call]
+
+
+def _place_labels(ax: Any, labels: list[Any], row: float = 0.11) -> None:
+    """Violation labels (x in data, y in axes fraction) inside the plot and apart: each one is
+    moved sideways into the plot, then down a row at a time until it overlaps none placed."""
+    if not labels:
+        return
+    renderer = _renderer(ax.figure)
+    frame = ax.get_window_extent(renderer)
+    placed: list[Any] = []
+    for text in labels:
+        box = text.get_window_extent(renderer)
+        shift = max(frame.x0 - box.x0, 0.0) + min(frame.x1 - box.x1, 0.0)
+        if shift:
+            x_display = ax.transData.transform((text.get_position()[0], 0.0))[0] + shift
+            text.set_x(float(ax.transData.inverted().transform((x_display, 0.0))[0]))
+        y = text.get_position()[1]
+        for _ in range(int(0.9 / row)):
+            box = text.get_window_extent(renderer)
+            if not any(box.overlaps(p) for p in placed):
+                break
+            y -= row
+            text.set_y(y)
+        placed.append(text.get_window_extent(renderer))
+
+
+def _stack_annotations(ax: Any, notes: list[Any], step_pt: float = 9.0) -> None:
+    """Frame numbers in a view: one that would print over another moves up a line."""
+    if not notes:
+        return
+    renderer = _renderer(ax.figure)
+    placed: list[Any] = []
+    for note in notes:
+        for _ in range(len(notes)):
+            box = note.get_window_extent(renderer)
+            if not any(box.overlaps(p) for p in placed):
+                break
+            x, y = note.xyann
+            note.xyann = (x, y + step_pt)
+        placed.append(note.get_window_extent(renderer))
 
 
 def _span(data: ReportData, a: int, b: int) -> tuple[float, float]:
@@ -312,13 +378,16 @@ def path_svg(data: ReportData) -> str:
         if not np.allclose(data.base2world, np.eye(4)):
             _frame_arrows(ax, np.linalg.inv(data.base2world), k, "stage origin", "#7a4ea3",
                           dy=8)
+        notes = []
         for j, pose in enumerate(data.poses):
             ax.plot(pose[:, 0], pose[:, k], "-o", color="#3b3b4f", lw=1.4, ms=2.2, zorder=2,
                     alpha=0.45 + 0.4 * j / max(1, len(data.poses) - 1),
                     label="robot at a frame" if j == 0 else None)
-            ax.annotate(f"{data.pose_frames[j]}", (pose[-1, 0], pose[-1, k]), xytext=(0, 5),
-                        textcoords="offset points", fontsize=7, color="#3b3b4f",
-                        ha="center")
+            notes.append(ax.annotate(
+                f"{data.pose_frames[j]}", (pose[-1, 0], pose[-1, k]), xytext=(0, 5),
+                textcoords="offset points", fontsize=7, color="#3b3b4f", ha="center",
+                gid=f"view-{k}-frame-{data.pose_frames[j]}"))
+        _stack_annotations(ax, notes)
         if cam.shape[0]:
             ax.plot(cam[:, 0], cam[:, k], color=_BLUE, lw=1.8, zorder=3, gid=f"view-{k}-path",
                     label="camera path")

@@ -1,0 +1,93 @@
+"""What one run computed: the robot's placement on set and the :class:`Analysis` of a shot.
+
+``convert`` (and ``check``) fill an :class:`Analysis`; the report, the summary and the MCAP
+read it. It lives in its own module so that what reads it does not import what makes it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from camtraj.ik import PathSolution
+    from camtraj.robot import Robot
+    from camtraj.timing import Take
+    from camtraj.usd_shot import Shot
+
+__all__ = ["Analysis", "Placement", "axis_value", "margins_summary"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where the robot base stands in the stage (metres, Z-up after unit/axis conversion).
+
+    ``base2world`` maps robot base coordinates into the converted stage world.
+    """
+
+    base2world: Array = field(default_factory=lambda: np.eye(4))
+    source: str = "default (identity)"
+
+    @classmethod
+    def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,
+                     source: str = "--placement") -> Placement:
+        a = math.radians(yaw_deg)
+        T = np.eye(4)
+        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                     [0.0, 0.0, 1.0]]
+        T[:3, 3] = (x, y, z)
+        return cls(T, source)
+
+    def describe(self) -> dict[str, Any]:
+        R = self.base2world[:3, :3]
+        return {
+            "source": self.source,
+            "translation_m": self.base2world[:3, 3].tolist(),
+            "yaw_deg": math.degrees(math.atan2(R[1, 0], R[0, 0])),
+            "rotation": R.tolist(),
+        }
+
+
+@dataclass
+class Analysis:
+    """Everything one run computed; ``take`` is None when the IK or timing stage failed."""
+
+    shot: Shot
+    robot: Robot
+    placement: Placement
+    targets: Array  # (n, 4, 4) camera2base
+    path: PathSolution | None = None
+    take: Take | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    collision: dict[str, Any] | None = None  # what the collision check found, if it ran
+
+
+def axis_value(name: str, value: float) -> float:
+    """SI value for display: degrees for revolute axes, metres otherwise."""
+    from camtraj.robot import JOINT_NAMES, REVOLUTE
+
+    return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
+
+
+def margins_summary(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
+    """Smallest distances to the position limits (per axis), the wrist singularity and full
+    stretch over the shot, with the film frame where each occurs (degrees / metres)."""
+    from camtraj.robot import JOINT_NAMES
+
+    m = path.margins
+    return {
+        "to_limits": {k: axis_value(k, float(v))
+                      for k, v in zip(JOINT_NAMES, m.to_limits, strict=True)},
+        "to_limits_frame": {k: int(frames[i])
+                            for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)},
+        "wrist_singularity_deg": math.degrees(m.wrist),
+        "wrist_singularity_frame": int(frames[m.wrist_frame]),
+        "full_stretch_deg": math.degrees(m.stretch),
+        "full_stretch_frame": int(frames[m.stretch_frame]),
+    }

@@ -1,0 +1,144 @@
+"""The README's example outputs, from real runs: find them, run them, compare or rewrite them.
+
+Every ```console block of README.md and pipelines/README.md is a transcript: lines starting
+with ``$ camtraj`` are commands, the lines after each are its output (stdout and stderr, as a
+terminal shows them). This script runs every command in a temporary folder in which
+``samples`` is the repository's sample folder (so ``samples/shots/...`` reads the shipped
+shots and ``out/...`` is written there), with ``camtraj`` meaning this interpreter's
+``-m camtraj``, and
+
+    python tests/readme_examples.py            # prints a diff per block that differs; exit 1
+    python tests/readme_examples.py --write    # rewrites the blocks with what the runs print
+                                               # (what `make readme` does)
+
+``tests/test_readme.py`` fails while any block differs. A console block holds only camtraj
+commands (anything else is shown in an ```sh block, which is not run), and no output that
+depends on the machine or the clock: keep such lines (elapsed times) out of the examples.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCUMENTS = (ROOT / "README.md", ROOT / "pipelines" / "README.md")
+REGENERATE = "make readme"
+"""How to bring the examples up to date (the command the test's failure message names)."""
+
+_FENCE = re.compile(r"^```console\n(.*?)^```\n", re.MULTILINE | re.DOTALL)
+PROMPT = "$ "
+
+
+class ExampleError(Exception):
+    """A console block that cannot be run as an example (it names the file and line)."""
+
+
+@dataclass(frozen=True)
+class Block:
+    """One ```console block: where its text is in the document, and its text."""
+
+    document: Path
+    start: int  # offset of the block's first line in the document
+    end: int
+    text: str
+
+    @property
+    def line(self) -> int:
+        return self.document.read_text(encoding="utf-8").count("\n", 0, self.start) + 1
+
+    @property
+    def commands(self) -> list[str]:
+        return [ln[len(PROMPT):] for ln in self.text.splitlines() if ln.startswith(PROMPT)]
+
+    @property
+    def name(self) -> str:
+        doc = self.document
+        return f"{doc.relative_to(ROOT) if doc.is_relative_to(ROOT) else doc}:{self.line}"
+
+
+def blocks(document: Path) -> list[Block]:
+    """The console blocks of ``document``, in order."""
+    text = document.read_text(encoding="utf-8")
+    return [Block(document, m.start(1), m.end(1), m.group(1)) for m in _FENCE.finditer(text)]
+
+
+def _argv(command: str, where: str) -> list[str]:
+    words = shlex.split(command, comments=True)
+    if not words or words[0] != "camtraj":
+        raise ExampleError(f"{where}: a console block runs only camtraj commands, not {command!r}"
+                           " (show other commands in an ```sh block)")
+    return [sys.executable, "-m", "camtraj", *words[1:]]
+
+
+def run_block(block: Block, work: Path) -> str:
+    """The transcript the block's commands print when run in ``work`` (one folder per block)."""
+    if not block.commands:
+        raise ExampleError(f"{block.name}: a console block with no '$ camtraj' command")
+    samples = work / "samples"
+    if not samples.exists():
+        samples.symlink_to(ROOT / "samples", target_is_directory=True)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p),
+        "PYTHONUNBUFFERED": "1", "COLUMNS": "100"}
+    out = []
+    for command in block.commands:
+        proc = subprocess.run(_argv(command, block.name), cwd=work, env=env, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, check=False,
+                              timeout=600)
+        out.append(PROMPT + command + "\n")
+        out.append(proc.stdout if proc.stdout.endswith("\n") or not proc.stdout
+                   else proc.stdout + "\n")
+    return "".join(out).replace(str(work) + os.sep, "")
+
+
+def diff(block: Block, got: str) -> str:
+    """A unified diff from the block as the README has it to ``got``."""
+    return "".join(difflib.unified_diff(
+        block.text.splitlines(keepends=True), got.splitlines(keepends=True),
+        f"{block.name} (README)", f"{block.name} (what camtraj prints now)"))
+
+
+def check(documents: tuple[Path, ...] = DOCUMENTS, *, write: bool = False) -> list[str]:
+    """Run every example; return a unified diff per block that differs (rewritten if ``write``)."""
+    diffs = []
+    for document in documents:
+        found = blocks(document)
+        text = document.read_text(encoding="utf-8")
+        here = []
+        for block in reversed(found):  # rewriting from the end keeps earlier offsets valid
+            with tempfile.TemporaryDirectory(prefix="camtraj-readme-") as work:
+                got = run_block(block, Path(work))
+            if got == block.text:
+                continue
+            here.append(diff(block, got))
+            text = text[:block.start] + got + text[block.end:]
+        if write:
+            document.write_text(text, encoding="utf-8")
+        diffs += reversed(here)
+    return diffs
+
+
+def main(argv: list[str]) -> int:
+    write = "--write" in argv
+    diffs = check(write=write)
+    for diff in diffs:
+        print(diff)
+    if write:
+        print(f"{len(diffs)} example block(s) rewritten")
+        return 0
+    if diffs:
+        print(f"{len(diffs)} README example(s) differ from what camtraj prints; "
+              f"run `{REGENERATE}` to rewrite them, then read the diff before committing")
+    return 1 if diffs else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

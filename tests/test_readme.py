@@ -1,0 +1,60 @@
+"""The README's example outputs are what camtraj prints (tests/readme_examples.py runs them)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.readme_examples import (
+    DOCUMENTS,
+    REGENERATE,
+    Block,
+    ExampleError,
+    blocks,
+    diff,
+    run_block,
+)
+
+EXAMPLES = [b for d in DOCUMENTS for b in blocks(d)]
+
+
+def test_the_readme_has_examples() -> None:
+    assert len(EXAMPLES) >= 3
+    assert all(b.commands for b in EXAMPLES)
+
+
+@pytest.mark.parametrize("block", EXAMPLES, ids=[b.name for b in EXAMPLES])
+def test_example_output_is_what_camtraj_prints(block: Block, tmp_path: Path) -> None:
+    got = run_block(block, tmp_path)
+    if got != block.text:
+        pytest.fail(
+            f"the README example at {block.name} differs from what camtraj prints now (a solver "
+            f"change moves numbers): run `{REGENERATE}` to rewrite every example, read the diff, "
+            f"and fix any prose around it that no longer holds\n{diff(block, got)}", pytrace=False)
+
+
+def test_a_changed_output_is_found_and_rewritten(tmp_path: Path) -> None:
+    """The mechanism itself: a stale number is a difference, and --write puts the real one."""
+    from tests import readme_examples
+
+    doc = tmp_path / "DOC.md"
+    stale = "$ camtraj check samples/shots/maya_dolly_push_in.usda --frames 1001:1010\n"
+    doc.write_text(f"Text.\n\n```console\n{stale}{{}}\n```\n\nMore text.\n", encoding="utf-8")
+    (block,) = blocks(doc)
+    work = tmp_path / "run"
+    work.mkdir()
+    real = run_block(block, work)
+    assert real.startswith(stale) and ": FEASIBLE at shot timing" in real
+    assert readme_examples.check((doc,)) != []
+    # ``check`` names blocks relative to the repository; a document elsewhere is fine to rewrite
+    assert readme_examples.check((doc,), write=True)
+    assert doc.read_text(encoding="utf-8") == f"Text.\n\n```console\n{real}```\n\nMore text.\n"
+    assert readme_examples.check((doc,)) == []
+
+
+def test_only_camtraj_commands_run(tmp_path: Path) -> None:
+    doc = tmp_path / "DOC.md"
+    doc.write_text("```console\n$ rm -rf out\n```\n", encoding="utf-8")
+    with pytest.raises(ExampleError, match="only camtraj commands"):
+        run_block(blocks(doc)[0], tmp_path)
