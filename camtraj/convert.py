@@ -28,7 +28,7 @@ from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
-from camtraj.robot import JOINT_NAMES, Robot
+from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.set_file import SetFile
 from camtraj.timing import Limits, time_shot
 from camtraj.usd_shot import Shot, read_shot
