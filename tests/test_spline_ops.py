@@ -1,0 +1,71 @@
+"""The refinement's model of the take against the timing stage itself.
+
+The shot objective lowers the peak use of the limits along the spline the timing stage moves
+on; its banded operators must give that spline's derivatives, and the refinement's gradient
+must be the derivative of what it minimises.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from camtraj import Robot
+from camtraj.ik.refine import _normal_equations
+from camtraj.ik.shot_cost import ShotCost
+from camtraj.ik.spline_ops import spline_ops
+from camtraj.timing import Limits
+from camtraj.timing.path import FramePath
+
+
+def smooth_path(robot: Robot, n: int, seed: int) -> np.ndarray:
+    """A path of n frames well inside the limits, every axis moving (no holds)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    mid = 0.5 * (robot.lower + robot.upper)
+    half = 0.5 * (robot.upper - robot.lower)
+    waves = sum(rng.uniform(-0.1, 0.1, 8) * np.sin(2 * np.pi * f * t + rng.uniform(0, 6, 8))
+                for f in (0.5, 1.3, 3.1))
+    return mid + half * (0.2 * t + waves)
+
+
+@pytest.mark.parametrize("n", [5, 40, 150, 400])
+def test_operators_give_the_timing_stages_spline(robot: Robot, n: int) -> None:
+    """Velocity, acceleration and jerk at every knot and piece middle, per knot interval^k:
+    the operators against FramePath's own polynomials (cut to a band of 14 frames: within 3%
+    of the axis's largest value)."""
+    q = smooth_path(robot, n, n)
+    limits = Limits.from_robot(robot)
+    path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper)
+    knots = np.arange(n, dtype=float)
+    mids = np.arange(n - 1) + 0.5
+    for op in spline_ops(n):
+        x = knots if op.coef.shape[0] == n else mids
+        want = path.at(x, 3)[op.order]
+        got = op.apply(q)
+        scale = np.abs(want).max(axis=0)
+        assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (op.order, n)
+
+
+def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) -> None:
+    """Directional derivatives of ``refine_total`` along random directions in the measures
+    (through a random Jacobian) against the normal equations' gradient."""
+    n = 120
+    q = smooth_path(robot, n, 7)
+    rng = np.random.default_rng(3)
+    y = np.concatenate([q, np.full((n, 2), 0.2)], axis=1)  # margins inside their zones
+    G = rng.normal(size=(n, 10, 2)) * 1e-2
+    base = ShotCost.for_robot(robot, 1.0 / 24.0)
+    for power in (6.0, 24.0):
+        cost = dataclasses.replace(base, power=power, scale=base.peak(q))
+        _, g = _normal_equations(cost, y, G)
+        j0 = cost.refine_total(y)
+        for _ in range(3):
+            d = rng.normal(size=(n, 2))
+            h = 1e-7
+            yp = y + np.einsum("kmp,kp->km", G, h * d)
+            ym = y - np.einsum("kmp,kp->km", G, h * d)
+            numeric = (cost.refine_total(yp) - cost.refine_total(ym)) / (2 * h)
+            assert numeric == pytest.approx(float((g * d).sum()), rel=1e-4, abs=1e-9 * j0)
