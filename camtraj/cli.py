@@ -518,8 +518,10 @@ def _report(r: dict[str, Any]) -> str:
                  f"margin column: nearest position limit")
     lines.append(f"  move to start: {start['duration_s']:.2f} s from the start pose (to start "
                  f"column: travel per axis)")
-    lines.append(f"  run-up {seconds(r['runup']['duration_s'])} s, run-out "
-                 f"{seconds(r['runout']['duration_s'])} s ({r.get('edges', 'gentle')}; "
+    # from the take's start to the first frame and from the last frame to its end (the
+    # ruckig moves plus the holds that put the frames on servo ticks), as the report shows
+    lines.append(f"  run-up {seconds(r['shot_start'])} s, run-out "
+                 f"{seconds(r['duration'] - r['shot_end'])} s ({r.get('edges', 'gentle')}; "
                  "ends column: their peak use of the limits)")
     if r.get("collision"):
         c = r["collision"]

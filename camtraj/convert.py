@@ -143,10 +143,8 @@ def analyse(
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
         on_start(analysis)
-    if (options.objective or robot.ik.objective) == "paper":  # frame by frame: a bar
-        progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
-    else:  # the whole shot in a few large steps: a bar would sit at 0% and jump to 100%
-        progress.stage("solve (whole shot)")
+    # frame by frame (paper), or the whole shot in steps, each worth its share of the frames
+    progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
     with _stage(timings, "ik"):
         flange2base = targets @ np.linalg.inv(robot.camera2flange)
         analysis.path = solve_path_report(

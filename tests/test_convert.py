@@ -434,12 +434,14 @@ def test_whip_pan_fails_under_shot_timing_naming_axis_frames_and_speed(
     assert run.proc.returncode == 3, run.proc.stderr
     line = error_line(run.proc)
     assert re.search(r"\bpan\b", line), line
-    # The whip happens between frames 16 and 24 (samples/shots/make_samples.py); every
-    # frame range named must touch it and stay near it.
+    # The whip happens between frames 16 and 24 (samples/shots/make_samples.py): the worst
+    # violation, named first, is pan's there. (The solver spreads the move over every axis
+    # up to the speed the take can run at, so at shot timing others exceed too.)
     ranges = [(int(a), int(b or a)) for a, b in re.findall(r"frames? (\d+)(?:-(\d+))?", line)]
     assert ranges, line
-    for a, b in ranges:
-        assert 14 <= a <= b <= 30 and a <= 24 and b >= 16, (a, b, line)
+    assert line.startswith("ERROR: pan "), line
+    a, b = ranges[0]
+    assert 14 <= a <= b <= 30 and a <= 24 and b >= 16, (a, b, line)
     # The speed that would work matches what --timing scale found.
     factor = runs["whip_scale"].summary_json()["speed_factor"]
     pct = numbers_before("%", line)

@@ -339,10 +339,14 @@ def test_reports_refuse_bad_input_with_exit_2(runs: Runs) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def shading_bands(pixels: NDArray[np.float32]) -> int:
-    """Horizontal bands of the page holding the plots' shot shading (#e6eef8)."""
+def shading_bands(pixels: NDArray[np.float32], *, red: bool = False) -> int:
+    """Horizontal bands of the page holding the plots' shot shading (#e6eef8), or (``red``)
+    that shading or a violation's red shading over it (a violation may cover a whole plot)."""
     shade = np.array([0xE6, 0xEE, 0xF8]) / 255.0
     near = np.all(np.abs(pixels - shade) < 4 / 255.0, axis=2)
+    if red:  # the violation span (#d62728 at alpha 0.15) over the shading
+        over = 0.15 * np.array([0xD6, 0x27, 0x28]) / 255.0 + 0.85 * shade
+        near |= np.all(np.abs(pixels - over) < 4 / 255.0, axis=2)
     rows = np.flatnonzero(near.sum(axis=1) > 300)
     if rows.size == 0:
         return 0
@@ -367,7 +371,7 @@ def test_chromium_shows_the_violation_in_red(runs: Runs) -> None:
     pixels = screenshot(runs.folder / "whip.html", runs.folder / "whip.png")
     red = (pixels[..., 0] > 0.75) & (pixels[..., 1] < 0.35) & (pixels[..., 2] < 0.35)
     assert np.count_nonzero(red) > 3000
-    assert shading_bands(pixels) == len(JOINT_NAMES)
+    assert shading_bands(pixels, red=True) == len(JOINT_NAMES)
 
 
 # --------------------------------------------------------------------------------------------

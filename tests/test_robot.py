@@ -82,7 +82,7 @@ def test_controller_units_reproduce_ga_eq22(tmp_path: Path) -> None:
         ("min = -180.0", "min = -200.0", ["joints.elbow", "-180, 0"]),
         ('angle_unit = "deg"', 'angle_unit = "grad"', ["angle_unit", "deg"]),
         ('\nobjective = "shot"', '\nobjective = "fast"', ["ik.objective"]),
-        ("track_samples = 2", "track_samples = 2.5", ["ik.track_samples", "whole"]),
+        ("track_samples = 4", "track_samples = 2.5", ["ik.track_samples", "whole"]),
         ("margin_weight = 10.0", "margin_weight = -1.0", ["ik.margin_weight", "between"]),
         ("weight = 30.0", 'weight = "heavy"', ["joints.elbow.weight", "number"]),
     ],

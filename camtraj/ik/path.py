@@ -13,7 +13,7 @@ from threadpoolctl import threadpool_limits
 from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
-from camtraj.ik.refine import refine
+from camtraj.ik.refine import REFINE_STAGES, refine
 from camtraj.ik.shot import Candidates, candidates, choose, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
@@ -128,9 +128,7 @@ def solve_path_report(
         raise ValueError(msg)
     if obj == "shot":
         with threadpool_limits(limits=1, user_api="blas"):
-            q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames)
-        if progress is not None:
-            progress(n)
+            q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames, progress)
     else:
         q = _solve_sequence(robot, Ts, first, frames, progress)
     prev = np.vstack([first, q[:-1]])
@@ -186,13 +184,16 @@ def _solve_sequence(robot: Robot, Ts: Array, first: Array, frames: NDArray[np.in
 
 
 def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
-               frames: NDArray[np.int_]) -> Array:
+               frames: NDArray[np.int_],
+               progress: Callable[[int], None] | None = None) -> Array:
     """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`).
 
     The dynamic programme chooses by frame-to-frame differences, a proxy for the take's
     speed, so the refinement starts from two of its answers: on the robot file's candidate
     grid and on the grid with half the track values (a different set of points, so another
     basin where the proxy misleads). The faster take, as the timing stage measures it, wins.
+    ``progress`` is called after each step (a start's programme, each refinement stage) with
+    that step's share of the n frames (the shares add up to n).
     """
     s = robot.ik
     cost = ShotCost.for_robot(robot, dt)
@@ -206,6 +207,14 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     best: tuple[float, Array] | None = None
     grids = dict.fromkeys([(s.track_samples, s.extend_samples),
                            (max(1, s.track_samples // 2), s.extend_samples)])
+    total = len(grids) * (1 + REFINE_STAGES)
+    done = [0]
+
+    def step() -> None:
+        if progress is not None:
+            progress(round(n * (done[0] + 1) / total) - round(n * done[0] / total))
+        done[0] += 1
+
     for n_track, n_extend in grids:
         cand = candidates(robot, targets, n_track, n_extend)
         cand = _rescue_empty_frames(robot, targets, cand, frames)
@@ -213,6 +222,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
             msg = "internal error: no candidate path through the shot"
             raise RuntimeError(msg)
+        step()
         rows = np.arange(n)
         x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
         j = cand.interval[rows, choice.point]
@@ -220,7 +230,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         ref = refine(robot, cost, targets, choice.branch, x0, choice.y,
                      np.minimum(lo1, x0[:, 0]), np.maximum(hi1, x0[:, 0]),
                      rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                     take_speed=take_speed)
+                     take_speed=take_speed, on_stage=step)
         speed = take_speed(ref.y[:, :8])
         if best is None or speed > best[0]:
             best = (speed, ref.y[:, :8])

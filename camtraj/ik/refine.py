@@ -34,6 +34,7 @@ IntArray = NDArray[np.intp]
 
 _H = 1e-6  # [m] central-difference step of the Jacobian
 _POWERS = (6.0, 12.0, 24.0, 48.0)  # the peak norm's continuation
+REFINE_STAGES = len(_POWERS)
 
 
 @dataclass
@@ -64,7 +65,8 @@ class _Corridor:
 def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
            y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
            tolerance: float = 1e-4,
-           take_speed: Callable[[Array], float] | None = None) -> Refined:
+           take_speed: Callable[[Array], float] | None = None,
+           on_stage: Callable[[], None] | None = None) -> Refined:
     """Lower the take's peak use from the start curves x0 (n, 2), measures y0 (n, 10).
 
     A continuation over the power of :meth:`ShotCost.refine_total`'s peak norm (6, 12, 24,
@@ -85,11 +87,14 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         take_speed: The maximum feasible speed of a joint path (n, 8) as the timing stage
             finds it; the start and every stage's answer are measured with it and the fastest
             is returned (default: ``1 / cost.peak``, the objective's own model).
+        on_stage: Called after each stage (for progress).
     """
     n = x0.shape[0]
     x, y = x0.copy(), y0.copy()
     final = replace(cost, power=_POWERS[-1], scale=max(cost.peak(y[:, :8]), 1e-6))
     if n < 2:
+        for _ in range(REFINE_STAGES if on_stage is not None else 0):
+            on_stage()  # type: ignore[misc]
         return Refined(x, y, final.refine_total(y), 0)
     corridor = _Corridor(robot, targets, lo1, hi1)
     speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
@@ -103,6 +108,8 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         v = speed(y[:, :8])
         if v >= best[0]:
             best = (v, x, y)
+        if on_stage is not None:
+            on_stage()
     _, x, y = best
     return Refined(x.copy(), y.copy(), final.refine_total(y), taken)
 
