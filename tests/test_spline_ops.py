@@ -60,7 +60,7 @@ def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) ->
     base = ShotCost.for_robot(robot, 1.0 / 24.0)
     for power in (6.0, 24.0):
         cost = dataclasses.replace(base, power=power, scale=base.peak(q))
-        _, g = _normal_equations(cost, y, G)
+        _, g, _, _ = _normal_equations(cost, y, G)
         j0 = cost.refine_total(y)
         for _ in range(3):
             d = rng.normal(size=(n, 2))

@@ -126,18 +126,22 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
     slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
     for _ in range(rounds):
         grad_y = _jacobian(robot, targets3, b3, x, y)
-        H, g = _normal_equations(cost, y, grad_y)
+        H, g, w, c = _normal_equations(cost, y, grad_y)
         improved = False
         for _try in range(10):
-            step = _solve_banded(H, g, mu)
-            xn = corridor.project(x + step)
-            yn, keep = branch_measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8], branch)
-            keep &= ~_folded(yn, y)
-            xn = np.where(keep[:, None], xn, x)
-            yn = np.where(keep[:, None], yn, y)
-            jn = cost.refine_total(yn)
+            step = _solve_rank1(H, g, mu, w, c)
+            xn, yn, jn = _try_step(robot, cost, corridor, targets, branch, x, y, step)
             if jn < j:
                 improved = True
+                # The model's curvature is an upper bound (the power mean's concave outer
+                # root is left out), so a good step is often too short: go on doubling it
+                # while that keeps lowering the objective.
+                for _grow in range(6):
+                    step = 2.0 * step
+                    xg, yg, jg = _try_step(robot, cost, corridor, targets, branch, x, y, step)
+                    if not jg < jn:
+                        break
+                    xn, yn, jn = xg, yg, jg
                 rel = (j - jn) / max(abs(j), 1e-300)
                 x, y, j = xn, yn, jn
                 mu = max(mu / 4.0, 1e-9)
@@ -150,6 +154,18 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
         if slow >= 3:
             break
     return x, y, taken
+
+
+def _try_step(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
+              branch: IntArray, x: Array, y: Array, step: Array) -> tuple[Array, Array, float]:
+    """The curves after a step, projected into the corridor; a frame the closed form cannot
+    solve there (or only by folding a turn) keeps its values. Returns x, y and the objective."""
+    xn = corridor.project(x + step)
+    yn, keep = branch_measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8], branch)
+    keep &= ~_folded(yn, y)
+    xn = np.where(keep[:, None], xn, x)
+    yn = np.where(keep[:, None], yn, y)
+    return xn, yn, cost.refine_total(yn)
 
 
 def _folded(ya: Array, yb: Array) -> NDArray[np.bool_]:
@@ -183,9 +199,10 @@ def _jacobian(robot: Robot, targets3: Array, b3: IntArray, x: Array, y: Array) -
     return grad_y
 
 
-def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[Array, Array]:
-    """Gauss-Newton normal matrix (n, D, 2, 2) (the 2 x 2 block of frame k with frame k + d)
-    and gradient of
+def _normal_equations(cost: ShotCost, y: Array,
+                      grad_y: Array) -> tuple[Array, Array, Array, float]:
+    """Gauss-Newton normal matrix (n, D, 2, 2) (the 2 x 2 block of frame k with frame k + d),
+    gradient, and the rank-one correction (w (n, 2), c: the curvature is H - c w w^T) of
     ``cost.refine_total``.
 
     The difference terms are first gathered per axis in the joints: ``M[d][p, i]`` is the
@@ -230,6 +247,9 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[Array, A
             gq[lo:lo + lin.shape[0]] += lin * f1[end]
             for o1 in range(lin.shape[0]):
                 M[: lin.shape[0] - o1, lo + o1] += lin[o1:] * (lin[o1] * f2[end])
+    # the peak norm's gradient alone: its concave outer root adds -c w w^T to the curvature
+    g_peak = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
+    concave = (1.0 - 1.0 / p) / max(kappa * phi, 1e-300)
     m = n - 1  # the motion tie-break, mean over steps, through its majorising quadratic
     if m > 0:
         z = np.diff(q, axis=0) / cost.vel
@@ -276,7 +296,7 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array) -> tuple[Array, A
         lo_f = min(edge, inner)
         a_lo, a_hi = (a_e, a_i) if edge < inner else (a_i, a_e)
         H[lo_f, 1] += (he[:, None, None] * a_lo[:, :, None] * a_hi[:, None, :]).sum(axis=0)
-    return H, g
+    return H, g, g_peak, concave
 
 
 def _gather(op: BandOp, dz: Array, w: Array, gq: Array, M: Array, pad: int) -> None:
@@ -342,8 +362,21 @@ def _dense_rows(op: BandOp, lo: int, hi: int) -> Array:
     return out
 
 
+def _solve_rank1(H: Array, g: Array, mu: float, w: Array, c: float) -> Array:
+    """The step for the curvature (H damped) - c w w^T (Sherman-Morrison over two banded
+    solves), with c cut so the matrix stays positive definite (c w^T A^-1 w <= 0.9)."""
+    both = _solve_banded(H, np.stack([g, -w], axis=-1), mu)  # A^-1 (-g), A^-1 w
+    s1, s2 = both[..., 0], both[..., 1]
+    wa = float((w * s2).sum())
+    if not (c > 0.0 and wa > 0.0 and np.isfinite(wa)):
+        return np.asarray(s1)
+    c = min(c, 0.9 / wa)
+    return np.asarray(s1 + s2 * (c * float((w * s1).sum()) / (1.0 - c * wa)))
+
+
 def _solve_banded(H: Array, g: Array, mu: float) -> Array:
-    """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step.
+    """Solve (H + mu diag(H) + eps I) step = -g for the (n, 2) step (or (n, 2, k) for k
+    right-hand sides g (n, 2, k)).
 
     ``H[k, d]`` is the 2x2 block coupling frame k with frame k + d (the d = 0 blocks are
     symmetric): a symmetric positive definite band of 2 D - 1 scalars above the diagonal,
@@ -363,9 +396,9 @@ def _solve_banded(H: Array, g: Array, mu: float) -> Array:
     ab[np.abs(ab) < 1e-24 * top] = 0.0
     shift = 1e-9 * top + 1e-12
     ab[u] = diag * (1.0 + mu) + shift
-    rhs = -g.reshape(-1)
+    rhs = -g.reshape(2 * n, -1)
     rhs[np.abs(rhs) < 1e-300] = 0.0
-    return np.asarray(solveh_banded(ab, rhs, check_finite=False)).reshape(n, 2)
+    return np.asarray(solveh_banded(ab, rhs, check_finite=False)).reshape(g.shape)
 
 
 @lru_cache(maxsize=16)
