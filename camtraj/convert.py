@@ -368,7 +368,7 @@ def summary(
         "robot": analysis.robot.name,
         "placement": analysis.placement.describe(),
         "timing": take.mode,
-        "edges": options.edges,
+        "edges": take.report.runup.get("edges", options.edges),  # gentle, unless it costs speed
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": float(take.rate),
         "duration": float(take.duration),

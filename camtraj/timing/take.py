@@ -213,6 +213,13 @@ def time_shot(
         raise ValueError(msg)
     start_q = None if start is None else _validate_start(start)
     real = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames)
+    edge_note = []
+    if real.edges != edges:
+        cost = (f"a {real.gentle_need / real.need:.2f}x slower take"
+                if math.isfinite(real.gentle_need) else "more room than the limits leave")
+        edge_note.append(f"a gentle run-up/run-out would need {cost}: the ends use the full "
+                         "acceleration and jerk limits (as --edges fast)")
+        edges = real.edges
     path, rt_x, rt, rt_checked, rt_checked_x = (real.path, real.x, real.stream, real.checked,
                                                 real.checked_x)
     fit, need, max_speed = real.fit, real.need, real.max_speed
@@ -225,7 +232,7 @@ def time_shot(
     def scaled() -> tuple[float, int, Samples, Array, Edge, Edge]:
         return _scale(path, dt, rate, limits, need, fit, start_q)
 
-    warnings: list[str] = []
+    warnings: list[str] = list(edge_note)
     if mode == "shot":
         problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
         if limiting or problem is not None:
@@ -343,6 +350,8 @@ class _RealTime:
     shot_need: float
     need: float
     max_speed: float
+    edges: str
+    gentle_need: float
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
@@ -353,9 +362,17 @@ class _RealTime:
         fit = _EdgeFit.of(path, stream, limits, edges, start, frames)
         # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
         shot_need = slowdown(checked, limits)
-        need = fit.factor(shot_need)
+        need = gentle_need = fit.factor(shot_need)
+        if edges == "gentle" and need > shot_need * (1.0 + LIMIT_RTOL):
+            # Gentle ends are worth no slower take: where they would force one, the ends
+            # use the full limits (the take a crew can shoot comes first).
+            fast = _EdgeFit.of(path, stream, limits, "fast", start, frames)
+            fast_need = fast.factor(shot_need)
+            if fast_need < need * (1.0 - LIMIT_RTOL):
+                fit, need, edges = fast, fast_need, "fast"
         max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
-        return cls(path, ticks, x, stream, checked, checked_x, fit, shot_need, need, max_speed)
+        return cls(path, ticks, x, stream, checked, checked_x, fit, shot_need, need, max_speed,
+                   edges, gentle_need)
 
 
 def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
