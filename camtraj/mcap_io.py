@@ -39,7 +39,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.reader import make_reader
 from mcap.stream_reader import CRCValidationError
-from mcap.writer import CompressionType
+from mcap.writer import CompressionType, IndexType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import ArrayLike, NDArray
@@ -830,7 +830,15 @@ def _write_mcap(
     metadata: dict[str, str],
     robot_metadata: dict[str, str],
 ) -> None:
-    writer = McapWriter(stream, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
+    # A take has no attachments: no (empty) attachment-index group or its summary offset.
+    # The data-end record carries the CRC-32 of every byte before it (magic included).
+    writer = McapWriter(
+        stream,
+        chunk_size=_CHUNK_SIZE,
+        compression=CompressionType.ZSTD,
+        index_types=IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA,
+        enable_data_crcs=True,
+    )
     writer.start(profile=PROFILE, library=_library_identifier())
     schema_ids: dict[str, int] = {}
     for schema_name in dict.fromkeys(TOPICS.values()):
