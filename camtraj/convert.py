@@ -277,6 +277,8 @@ def take_data(analysis: Analysis) -> TakeData:
         horizontal_aperture_mm=shot.horizontal_aperture_mm,
         vertical_aperture_mm=shot.vertical_aperture_mm,
         base2world=analysis.placement.base2world,
+        horizontal_aperture_offset_mm=shot.horizontal_aperture_offset_mm,
+        vertical_aperture_offset_mm=shot.vertical_aperture_offset_mm,
     )
 
 

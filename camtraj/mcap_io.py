@@ -39,7 +39,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.reader import make_reader
 from mcap.stream_reader import CRCValidationError
-from mcap.writer import CompressionType
+from mcap.writer import CompressionType, IndexType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import ArrayLike, NDArray
@@ -420,7 +420,8 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
     height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
                                IMAGE_WIDTH)[0]) if n else 1
     K = camera_matrices(take.focal_length_mm, take.horizontal_aperture_mm,
-                        take.vertical_aperture_mm, IMAGE_WIDTH, height)
+                        take.vertical_aperture_mm, IMAGE_WIDTH, height,
+                        take.horizontal_aperture_offset_mm, take.vertical_aperture_offset_mm)
     P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
     tpl = _Cdr()
     tpl.slot_time("stamp")
@@ -568,6 +569,9 @@ class TakeData:
             fallback (15.2908 mm).
         base2world: The placement, robot base into the converted stage, shape (4, 4) [m]
             (tf's ``world`` -> ``base_link``).
+        horizontal_aperture_offset_mm, vertical_aperture_offset_mm: Lens shift per frame
+            [mm] (film back off the lens axis, +x right, +y up), shape (n,); None: zeros.
+            CameraInfo's principal point (cx, cy) carries it.
     """
 
     joint_names: tuple[str, ...]
@@ -587,6 +591,8 @@ class TakeData:
     horizontal_aperture_mm: Array | None = None
     vertical_aperture_mm: Array | None = None
     base2world: Array = field(default_factory=lambda: np.eye(4))
+    horizontal_aperture_offset_mm: Array | None = None
+    vertical_aperture_offset_mm: Array | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -628,6 +634,9 @@ class TakeData:
             if np.any(aperture <= 0):
                 msg = f"TakeData.{name} must be positive"
                 raise ValueError(msg)
+        for name in ("horizontal_aperture_offset_mm", "vertical_aperture_offset_mm"):
+            value = getattr(self, name)
+            self._array(name, np.zeros(n) if value is None else value, (n,))
         self._array("base2world", self.base2world, (4, 4))
         fps = float(self.fps)
         if not (math.isfinite(fps) and fps > 0):
@@ -830,7 +839,15 @@ def _write_mcap(
     metadata: dict[str, str],
     robot_metadata: dict[str, str],
 ) -> None:
-    writer = McapWriter(stream, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
+    # A take has no attachments: no (empty) attachment-index group or its summary offset.
+    # The data-end record carries the CRC-32 of every byte before it (magic included).
+    writer = McapWriter(
+        stream,
+        chunk_size=_CHUNK_SIZE,
+        compression=CompressionType.ZSTD,
+        index_types=IndexType.CHUNK | IndexType.MESSAGE | IndexType.METADATA,
+        enable_data_crcs=True,
+    )
     writer.start(profile=PROFILE, library=_library_identifier())
     schema_ids: dict[str, int] = {}
     for schema_name in dict.fromkeys(TOPICS.values()):

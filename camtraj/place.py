@@ -101,7 +101,7 @@ class Result:
     def key(self) -> tuple[float, ...]:
         """Larger is better."""
         m = self.margins
-        margin = min(m.get("limits", 0.0), m.get("wrist_deg", 0.0) / 90.0,
+        margin = min(1.0 - m.get("limits_use", 1.0), m.get("wrist_deg", 0.0) / 90.0,
                      m.get("stretch_deg", 0.0) / 180.0)
         speed = math.floor(100.0 * min(self.max_speed, _SPEED_CAP)) if self.max_speed > 0 else 0
         return (self.reachable, float(self.collision_free), float(self.feasible), speed, margin)
@@ -128,10 +128,11 @@ def pose(x: float, y: float, z: float, yaw_deg: float) -> Array:
 
 
 def margins(robot: Robot, q: Array) -> dict[str, float]:
-    """Smallest margins over the path: position limits (fraction of half the range), wrist
-    (tilt from ±90° [deg]), stretch (elbow's interior angle from 180° [deg])."""
+    """Margins over the path: ``limits_use``, the peak position-limit use like every other
+    use (0 mid-range, 1 touching a limit: fraction of half the range), and the smallest wrist
+    (tilt from ±90° [deg]) and stretch (elbow's interior angle from 180° [deg]) margins."""
     mid, half = 0.5 * (robot.upper + robot.lower), 0.5 * (robot.upper - robot.lower)
-    limits = float(1.0 - np.max(np.abs(q - mid) / half))
+    limits_use = float(np.max(np.abs(q - mid) / half))
     tilt = q[:, JOINT_NAMES.index("tilt")]
     wrist = float(np.min(np.abs(np.abs(np.degrees(tilt)) - 90.0)))
     dh = robot.dh
@@ -142,7 +143,7 @@ def margins(robot: Robot, q: Array) -> dict[str, float]:
     dse = np.hypot(dh.r40 + q[:, JOINT_NAMES.index("extend")], dh.l3)
     cos_e = np.clip((dse**2 + dh.r6**2 - ws**2) / (2 * dh.r6 * dse), -1.0, 1.0)
     stretch = float(np.min(180.0 - np.degrees(np.arccos(cos_e))))
-    return {"limits": limits, "wrist_deg": wrist, "stretch_deg": stretch}
+    return {"limits_use": limits_use, "wrist_deg": wrist, "stretch_deg": stretch}
 
 
 def _binding(peak_use: dict[str, dict[str, float]]) -> str:
@@ -475,8 +476,10 @@ def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
              f"in {report.seconds:.1f} s (floor z {report.base_z:.3f} m)",
-             "  #     x [m]     y [m]  yaw [deg]  speed  binding               limits  wrist"
-             "  stretch  obstacle"]
+             "  #     x [m]     y [m]  yaw [deg]  speed  binding           limits use  wrist"
+             "  stretch  obstacle",
+             "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
+             "stretch: margins)"]
     for i, r in enumerate(report.results, 1):
         m = r.margins
         speed = f"{math.floor(100 * min(r.max_speed, 99.99)):4d}%" if r.max_speed > 0 else "   -"
@@ -485,7 +488,7 @@ def table(report: PlaceReport) -> str:
                                               else f"{obst:6.2f} m")
         lines.append(
             f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.1f}  {speed:>5}  {r.binding:<20}"
-            f"  {100 * m.get('limits', 0.0):4.0f}%  {m.get('wrist_deg', 0.0):4.0f}°"
+            f"  {100 * m.get('limits_use', 1.0):5.0f}%  {m.get('wrist_deg', 0.0):4.0f}°"
             f"  {m.get('stretch_deg', 0.0):6.0f}°  {ob}")
         if not r.ok:
             lines.append(f"     not possible: {r.reason}")

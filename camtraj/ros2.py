@@ -95,6 +95,8 @@ def camera_matrices(
     vertical_aperture_mm: ArrayLike,
     width: int = IMAGE_WIDTH,
     height: int | None = None,
+    horizontal_offset_mm: ArrayLike | None = None,
+    vertical_offset_mm: ArrayLike | None = None,
 ) -> Array:
     """Pinhole camera matrices K [px] per frame, shape (n, 3, 3).
 
@@ -105,6 +107,10 @@ def camera_matrices(
         width: Image width [px].
         height: Image height [px] for every frame; default the first frame's
             :func:`image_heights` (one image size for the take).
+        horizontal_offset_mm, vertical_offset_mm: (n,) lens shift [mm], USD's
+            ``horizontalApertureOffset`` (+x right) and ``verticalApertureOffset`` (+y up):
+            the film back moves off the lens axis, so the principal point moves the other
+            way in the image (x right, y down); default 0.
     """
     f = np.asarray(focal_length_mm, dtype=float)
     h = np.asarray(horizontal_aperture_mm, dtype=float)
@@ -114,8 +120,12 @@ def camera_matrices(
     K = np.zeros((len(f), 3, 3))
     K[:, 0, 0] = f / h * width
     K[:, 1, 1] = f / v * height
-    K[:, 0, 2] = width / 2.0
-    K[:, 1, 2] = height / 2.0
+    ox = np.zeros(len(f)) if horizontal_offset_mm is None else np.asarray(horizontal_offset_mm,
+                                                                             dtype=float)
+    oy = np.zeros(len(f)) if vertical_offset_mm is None else np.asarray(vertical_offset_mm,
+                                                                           dtype=float)
+    K[:, 0, 2] = width / 2.0 - ox / h * width
+    K[:, 1, 2] = height / 2.0 + oy / v * height
     K[:, 2, 2] = 1.0
     return K
 

@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pxr import Sdf, Tf, Usd, UsdGeom
+from pxr import Sdf, Tf, Usd, UsdGeom, UsdRender
 
 from camtraj.errors import ShotFileError, frame_ranges
 
@@ -74,6 +74,8 @@ MAX_FRAMES = 100_000
 """The most film frames one shot may have (69 minutes at 24 fps)."""
 # Focal lengths of real cine and photo lenses [mm]: fisheyes to the longest telephotos.
 _PLAUSIBLE_FOCAL_MM = (4.0, 1200.0)
+# Film back widths of real cameras [mm]: small 1/4" sensors to 65 mm and 70 mm film.
+_PLAUSIBLE_FILM_BACK_MM = (2.0, 80.0)
 # A rendered view direction this far from the orthonormalised one is worth a warning [deg].
 _SHEAR_WARN_DEG = 0.01
 # ShotFrame.frame is an int32.
@@ -107,11 +109,15 @@ class Shot:
         meters_per_unit: The stage's ``metersPerUnit`` (scene unit length in [m]).
         up_axis: The stage's up axis, ``"Y"`` or ``"Z"``.
         warnings: One-line notes about the shot that do not stop it (an implausible focal
-            length, an orthographic camera, a sheared parent).
+            length or film back, lens shift or film shake, an orthographic camera, a sheared
+            camera transform or parent, non-square render pixels).
         time_codes_per_second: The stage's ``timeCodesPerSecond``.
         horizontal_aperture_mm: (n,) film back width in [mm].
         vertical_aperture_mm: (n,) film back height in [mm].
         clipping_range_m: (n, 2) near and far clipping distances in [m].
+        horizontal_aperture_offset_mm: (n,) lens shift: the film back's offset from the lens
+            axis, +x right [mm] (``horizontalApertureOffset``); None: zeros.
+        vertical_aperture_offset_mm: (n,) the same, +y up [mm] (``verticalApertureOffset``).
     """
 
     source: str
@@ -131,9 +137,14 @@ class Shot:
     vertical_aperture_mm: NDArray[np.float64]
     clipping_range_m: NDArray[np.float64]
     warnings: tuple[str, ...] = ()
+    horizontal_aperture_offset_mm: NDArray[np.float64] | None = None
+    vertical_aperture_offset_mm: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frames)
+        for name in ("horizontal_aperture_offset_mm", "vertical_aperture_offset_mm"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(n))
         shapes: dict[str, tuple[int, ...]] = {
             "frames": (n,),
             "time_codes": (n,),
@@ -145,6 +156,8 @@ class Shot:
             "horizontal_aperture_mm": (n,),
             "vertical_aperture_mm": (n,),
             "clipping_range_m": (n, 2),
+            "horizontal_aperture_offset_mm": (n,),
+            "vertical_aperture_offset_mm": (n,),
         }
         for name, shape in shapes.items():
             dtype = np.int64 if name == "frames" else np.float64
@@ -363,6 +376,8 @@ def _read(
         ("fStop", cam.GetFStopAttr()),
         ("horizontalAperture", cam.GetHorizontalApertureAttr()),
         ("verticalAperture", cam.GetVerticalApertureAttr()),
+        ("horizontalApertureOffset", cam.GetHorizontalApertureOffsetAttr()),
+        ("verticalApertureOffset", cam.GetVerticalApertureOffsetAttr()),
         ("clippingRange", cam.GetClippingRangeAttr()),
     ):
         values = _sample_attribute(attr, time_codes, 2 if name == "clippingRange" else 0)
@@ -379,6 +394,8 @@ def _read(
         return values * (meters_per_unit * 100.0)
 
     focal_length_mm = to_mm(lens["focalLength"])
+    aperture_mm = to_mm(lens["horizontalAperture"]), to_mm(lens["verticalAperture"])
+    offset_mm = to_mm(lens["horizontalApertureOffset"]), to_mm(lens["verticalApertureOffset"])
     warnings = [
         w
         for w in (
@@ -386,8 +403,17 @@ def _read(
                 cam_path, lens["focalLength"], focal_length_mm, meters_per_unit,
                 focal_length_unit, frame_numbers,
             ),
+            _film_back_warning(
+                cam_path, lens["horizontalAperture"], aperture_mm[0], meters_per_unit,
+                focal_length_unit, frame_numbers,
+            )
+            # USD's fallback (20.955 tenths of a unit) is only a film back on a cm stage.
+            if cam.GetHorizontalApertureAttr().HasAuthoredValue()
+            else None,
+            _lens_shift_warning(cam_path, offset_mm, frame_numbers),
             _orthographic_warning(cam, cam_path),
-            _shear_warning(cam_path, shear_deg, frame_numbers),
+            _shear_warning(cam_path, shear_deg, frame_numbers, _has_moving_parent(prim)),
+            _pixel_aspect_warning(stage),
         )
         if w
     ]
@@ -410,9 +436,11 @@ def _read(
         warnings=tuple(warnings),
         time_codes_per_second=float(tcps),
         # Apertures are in the focal length's unit (tenths of a scene unit, or millimetres).
-        horizontal_aperture_mm=to_mm(lens["horizontalAperture"]),
-        vertical_aperture_mm=to_mm(lens["verticalAperture"]),
+        horizontal_aperture_mm=aperture_mm[0],
+        vertical_aperture_mm=aperture_mm[1],
         clipping_range_m=lens["clippingRange"] * meters_per_unit,
+        horizontal_aperture_offset_mm=offset_mm[0],
+        vertical_aperture_offset_mm=offset_mm[1],
     )
 
 
@@ -563,9 +591,14 @@ def _film_frames(
 
     if frames is None:
         if span is None:
+            animation = (
+                "is animated with splines, which give no frame range"
+                if _has_splines(prim)
+                else "has no time samples"
+            )
             msg = (
                 f"{path}: no frame range: the stage has no startTimeCode/endTimeCode and the "
-                "camera is not animated; give the frames to read"
+                f"camera {animation}; give the frames to read with --frames FIRST:LAST"
             )
             raise ShotFileError(msg)
         first, last = span
@@ -746,15 +779,107 @@ def _orthographic_warning(cam: Any, cam_path: str) -> str | None:
     )
 
 
+def _film_back_warning(
+    cam_path: str,
+    authored: NDArray[np.float64],
+    width_mm: NDArray[np.float64],
+    meters_per_unit: float,
+    unit: str,
+    frames: NDArray[np.int64],
+) -> str | None:
+    """A note when the film back's width is outside real sensor sizes (a unit mix-up).
+
+    Args:
+        authored: (n,) ``horizontalAperture`` as authored.
+        width_mm: (n,) the film back width as read [mm].
+    """
+    lo, hi = _PLAUSIBLE_FILM_BACK_MM
+    bad = (width_mm < lo) | (width_mm > hi)
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad)[0])
+    text = (
+        f"camera {cam_path} film back {float(width_mm[i]):g} mm wide at frame {int(frames[i])} "
+        f"(horizontalAperture {float(authored[i]):g}) is outside the {lo:g}-{hi:g} mm of real "
+        "sensors"
+    )
+    if unit == "schema" and bool(np.all((authored >= lo) & (authored <= hi))):
+        text += (
+            f"; USD's apertures are in tenths of a scene unit (here {meters_per_unit:g} m): "
+            "millimetres written by the exporter? try --focal-length-unit mm"
+        )
+    return text
+
+
+def _lens_shift_warning(
+    cam_path: str,
+    offset_mm: tuple[NDArray[np.float64], NDArray[np.float64]],
+    frames: NDArray[np.int64],
+) -> str | None:
+    """A note when the film back is off the lens axis (lens shift, or film shake if it moves)."""
+    offsets = np.stack(offset_mm, axis=1)
+    size = np.linalg.norm(offsets, axis=1)
+    if not np.any(size > 0.0):
+        return None
+    i = int(np.argmax(size))
+    moving = bool(np.ptp(offsets, axis=0).max() > 0.0)
+    what = "film shake (animated aperture offset)" if moving else "lens shift"
+    return (
+        f"camera {cam_path} has {what}: horizontalApertureOffset {float(offsets[i, 0]):g} mm, "
+        f"verticalApertureOffset {float(offsets[i, 1]):g} mm at frame {int(frames[i])}; an "
+        "off-centre frame cannot come from moving the robot (it needs a shift lens or a "
+        "reframe in post); the offset is carried in CameraInfo's principal point (cx, cy)"
+    )
+
+
+def _pixel_aspect_warning(stage: Any) -> str | None:
+    """A note when render settings or products ask for non-square pixels."""
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdRender.SettingsBase):
+            continue
+        attr = UsdRender.SettingsBase(prim).GetPixelAspectRatioAttr()
+        value = attr.Get() if attr.HasAuthoredValue() else None
+        if value is not None and abs(float(value) - 1.0) > 1e-6:
+            return (
+                f"render settings {prim.GetPath()} have pixelAspectRatio {float(value):g} "
+                "(non-square pixels, an anamorphic frame?): camtraj ignores it; the robot "
+                "follows the camera and CameraInfo assumes square pixels"
+            )
+    return None
+
+
+def _has_moving_parent(prim: Any) -> bool:
+    """Whether any ancestor of the camera has transform ops of its own."""
+    p = prim.GetParent()
+    while p and not p.IsPseudoRoot():
+        xformable = UsdGeom.Xformable(p)
+        if xformable and xformable.GetOrderedXformOps():
+            return True
+        p = p.GetParent()
+    return False
+
+
+def _has_splines(prim: Any) -> bool:
+    """Whether the camera or an ancestor has a spline-valued attribute (no time samples)."""
+    p = prim
+    while p and not p.IsPseudoRoot():
+        if any(attr.HasSpline() for attr in p.GetAttributes()):
+            return True
+        p = p.GetParent()
+    return False
+
+
 def _shear_warning(
-    cam_path: str, shear_deg: NDArray[np.float64], frames: NDArray[np.int64]
+    cam_path: str, shear_deg: NDArray[np.float64], frames: NDArray[np.int64], parent: bool
 ) -> str | None:
     worst = int(np.argmax(shear_deg))
     angle = float(shear_deg[worst])
     if not angle > _SHEAR_WARN_DEG:
         return None
+    what = ("a sheared or non-uniformly scaled parent" if parent
+            else "a sheared camera transform (a non-uniform scale outside its rotation)")
     return (
-        f"camera {cam_path} has a sheared or non-uniformly scaled parent: the rendered view "
+        f"camera {cam_path} has {what}: the rendered view "
         f"direction differs from the orthonormalised pose the robot follows by up to "
         f"{angle:.1f} deg (frame {int(frames[worst])})"
     )

@@ -692,3 +692,38 @@ def test_one_minute_take(tmp_path: Path) -> None:
     assert list(last.accelerations) == take.qdd[-1].tolist()
     assert last.time_from_start.sec == 59
     assert last.time_from_start.nanosec == 996_000_000
+
+
+def test_data_end_crc_and_summary_offsets(written: Path) -> None:
+    """The data-end CRC is the CRC-32 of every byte before the DataEnd record (the spec's
+    recommendation), checked against zlib; every summary offset points at a non-empty group."""
+    import io
+    import struct
+    import zlib
+
+    from mcap.records import DataEnd, SummaryOffset
+    from mcap.stream_reader import CRCValidationError, StreamReader
+
+    data = written.read_bytes()
+    # Footer: opcode 0x02, length 20, summary_start, summary_offset_start, crc; then magic.
+    footer = data[-8 - 29 : -8]
+    assert footer[0] == 0x02
+    summary_start, summary_offset_start, _crc = struct.unpack("<QQI", footer[9:])
+    data_end = data[summary_start - 13 : summary_start]
+    assert data_end[0] == 0x0F  # DataEnd opcode
+    assert struct.unpack("<Q", data_end[1:9])[0] == 4
+    expected = zlib.crc32(data[: summary_start - 13])
+    assert struct.unpack("<I", data_end[9:])[0] == expected != 0
+
+    with written.open("rb") as f:
+        records = list(StreamReader(f, validate_crcs=True).records)
+    ends = [r for r in records if isinstance(r, DataEnd)]
+    assert [e.data_section_crc for e in ends] == [expected]
+    offsets = [r for r in records if isinstance(r, SummaryOffset)]
+    assert offsets and all(o.group_length > 0 for o in offsets)
+    assert all(summary_start <= o.group_start < summary_offset_start for o in offsets)
+    # A changed byte in the header (covered by no other CRC) is caught by the data-end CRC.
+    damaged = bytearray(data)
+    damaged[len(data.split(b"camtraj", 1)[0])] ^= 0x20  # "camtraj" -> "Camtraj"
+    with pytest.raises(CRCValidationError):
+        list(StreamReader(io.BytesIO(bytes(damaged)), validate_crcs=True).records)

@@ -300,3 +300,35 @@ def test_many_keep_outs_give_what_each_one_tested_alone_gives(robot: Robot) -> N
     expected = np.array([not rail.intersects(union) for rail in rails])
     assert 0 < ok.sum() < len(ok)
     np.testing.assert_array_equal(ok, expected)
+
+
+def test_limits_column_is_use_like_every_other_percentage(robot: Robot) -> None:
+    """place's "limits use": 0% with every axis mid-range, 100% with one touching a limit,
+    the same meaning as info's position use (|q - mid| / half range)."""
+    from camtraj.place import PlaceReport, Result, margins, table
+    from camtraj.set_file import SetFile
+
+    mid = 0.5 * (robot.upper + robot.lower)
+    half = 0.5 * (robot.upper - robot.lower)
+    q = np.tile(mid, (3, 1))
+    assert margins(robot, q)["limits_use"] == pytest.approx(0.0, abs=1e-12)
+    q[1, 2] = robot.upper[2]
+    assert margins(robot, q)["limits_use"] == pytest.approx(1.0)
+    q[1, 2] = mid[2] - 0.4 * half[2]
+    assert margins(robot, q)["limits_use"] == pytest.approx(0.4)
+
+    def result(use: float) -> Result:
+        return Result(x=1.0, y=2.0, yaw_deg=0.0, full=True, reachable=1.0,
+                      collision_free=True, feasible=True, max_speed=1.5, binding="track jerk",
+                      margins={"limits_use": use, "wrist_deg": 30.0, "stretch_deg": 60.0})
+
+    low, high = result(0.4), result(0.9)
+    assert low.key() > high.key()  # less of the range used ranks higher
+    text = table(PlaceReport("shot.usda", 0.0, [low, high], 2, 10, 1.0, SetFile(), {}))
+    lines = text.splitlines()
+    header, rows = lines[1], [ln for ln in lines if ln.lstrip().startswith(("1 ", "2 "))]
+    assert "limits use" in header and "100% touching a limit" in text
+    assert [r.split("%")[1].split()[-1] for r in rows] == ["40", "90"]
+    # The number sits under its header.
+    end = header.index("limits use") + len("limits use")
+    assert [r[:end][-4:] for r in rows] == [" 40%", " 90%"]
