@@ -231,9 +231,8 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
                      np.minimum(lo1, x0[:, 0]), np.maximum(hi1, x0[:, 0]),
                      rounds=s.refine_rounds, tolerance=s.refine_tolerance,
                      take_speed=take_speed, on_stage=step)
-        speed = take_speed(ref.y[:, :8])
-        if best is None or speed > best[0]:
-            best = (speed, ref.y[:, :8])
+        if best is None or ref.speed > best[0]:
+            best = (ref.speed, ref.y[:, :8])
     assert best is not None
     return best[1]
 

@@ -15,6 +15,7 @@ exact objective drops, so the result is never worse than its start.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -39,12 +40,14 @@ REFINE_STAGES = len(_POWERS)
 
 @dataclass
 class Refined:
-    """The refined curves: x (n, 2) [m], measures y (n, 10), objective J, rounds taken."""
+    """The refined curves: x (n, 2) [m], measures y (n, 10), objective J, rounds taken, and
+    the take's maximum feasible speed (as ``take_speed`` measures it)."""
 
     x: Array
     y: Array
     cost: float
     rounds: int
+    speed: float = math.inf
 
 
 class _Corridor:
@@ -95,10 +98,12 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
     if n < 2:
         for _ in range(REFINE_STAGES if on_stage is not None else 0):
             on_stage()  # type: ignore[misc]
-        return Refined(x, y, final.refine_total(y), 0)
+        return Refined(x, y, final.refine_total(y), 0, math.inf)
     corridor = _Corridor(robot, targets, lo1, hi1)
-    speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
     taken = 0
+    # the start and every stage's answer by the timing stage (which also sees what the
+    # objective's model leaves out: gentle ends, the room they need): the fastest wins
+    speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
     best = (speed(y[:, :8]), x, y)
     for power in _POWERS:
         stage = replace(cost, power=power, scale=max(cost.peak(y[:, :8]), 1e-6))
@@ -110,8 +115,8 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
             best = (v, x, y)
         if on_stage is not None:
             on_stage()
-    _, x, y = best
-    return Refined(x.copy(), y.copy(), final.refine_total(y), taken)
+    v, x, y = best
+    return Refined(x.copy(), y.copy(), final.refine_total(y), taken, v)
 
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
