@@ -127,6 +127,11 @@ def solve_path_report(
               f"{frame_interval!r}"
         raise ValueError(msg)
     if obj == "shot":
+        # scipy's own OpenBLAS (the refinement's banded solve) must be loaded before the limit
+        # is set, or the limit does not reach it: two spinning BLAS threads per tiny solve
+        # cost 100x the wall time on a shared machine
+        import scipy.linalg  # noqa: F401
+
         with threadpool_limits(limits=1, user_api="blas"):
             q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames, progress)
     else:
