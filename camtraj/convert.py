@@ -324,15 +324,24 @@ def run_warnings(analysis: Analysis) -> list[str]:
 def step_warning(robot: Robot, path: PathSolution, frames: NDArray[np.int_],
                  dt: float) -> str | None:
     """A warning where the joint path jumps: a frame-to-frame step beyond what an axis can
-    do in one frame at its velocity limit (a flip, or a wrap around a limit). The take then
-    has to slow the whole shot to cover it; the largest such step is named."""
+    do in one frame at its velocity limit (the papers' per-frame objective: a flip, or a wrap
+    around a limit; any objective: a revolute step of more than a quarter turn). The take
+    then has to slow the whole shot to cover it; the largest such step is named. (A move
+    that is simply faster than an axis, like a whip pan, is the timing stage's to report.)"""
     if path.within_step.all():
         return None
-    steps = np.abs(np.diff(path.q, axis=0)) / (robot.max_velocity * dt)
+    delta = np.diff(path.q, axis=0)
+    steps = np.abs(delta) / (robot.max_velocity * dt)
+    jump = steps > 1.0
+    if path.objective != "paper":
+        jump &= REVOLUTE & (np.abs(delta) > 0.5 * math.pi)
+    if not jump.any():
+        return None
+    steps = np.where(jump, steps, 0.0)
     k, j = np.unravel_index(int(np.argmax(steps)), steps.shape)
-    step = float(path.q[k + 1, j] - path.q[k, j])
+    step = float(delta[k, j])
     size = f"{math.degrees(step):+.1f} deg" if REVOLUTE[j] else f"{step:+.3f} m"
-    count = int((~path.within_step).sum())
+    count = int(jump.any(axis=1).sum())
     which = "" if path.objective == "shot" else f" of the {path.objective} objective"
     return (f"{count} frame(s) jump: {JOINT_NAMES[j]} moves {size} between frames "
             f"{int(frames[k])} and {int(frames[k + 1])}, {float(steps[k, j]):.1f}x what it can "
