@@ -1158,6 +1158,207 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
     )
 
 
+def read_take_for_report(path: str | Path) -> ReadTake:
+    """Read what ``camtraj report`` needs, in memory proportional to the arrays it keeps.
+
+    :func:`read_take` decodes every message into Python objects (about 50 KB per film
+    frame). This reader streams the messages one at a time, skips /joint_states (the
+    ``t``, ``q``, ``qd`` and ``effort_sizes`` fields come back empty, ``topics`` too) and
+    decodes the single /joint_trajectory message straight from its CDR bytes into arrays.
+
+    Raises:
+        InputError: As :func:`read_take`.
+    """
+    path = Path(path)
+    with _open_for_reading(path) as stream:
+        result: ReadTake = _guard(path, lambda: _read_for_report(path, stream))
+    return result
+
+
+def _read_for_report(path: Path, stream: IO[bytes]) -> ReadTake:
+    reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
+    header = reader.get_header()
+    summary = reader.get_summary()
+    if summary is None or summary.statistics is None:
+        msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
+        raise InputError(msg)
+    topics_present = {ch.topic for ch in summary.channels.values()}
+    missing = [t for t in TOPICS if t not in topics_present]
+    if missing:
+        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
+        raise InputError(msg)
+    counts = {summary.channels[cid].topic: int(n)
+              for cid, n in summary.statistics.channel_message_counts.items()
+              if cid in summary.channels}
+    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
+        if counts.get(topic, 0) != 1:
+            msg = f"{path}: {topic} has {counts.get(topic, 0)} messages, expected 1"
+            raise InputError(msg)
+    if counts.get(TOPIC_JOINT_STATES, 0) < 1:
+        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
+        raise InputError(msg)
+
+    # The trajectory first: its bytes are freed before the other arrays grow.
+    traj_data: bytes = b""
+    for _schema, _channel, message in reader.iter_messages(topics=[TOPIC_TRAJECTORY]):
+        traj_data = message.data
+    names, stamp, t, q, qd, qdd = _decode_trajectory(path, traj_data)
+    del traj_data, message
+    # /shot/frames and /tf: one decoded message at a time into preallocated arrays.
+    n = counts.get(TOPIC_FRAMES, 0)
+    frame_numbers = np.zeros(n, dtype=np.int64)
+    frame_times = np.zeros(n)
+    pose7 = np.zeros((2, n, 7))
+    lens = np.zeros((3, n))
+    frame_q: list[Array] = []
+    frame_names: tuple[str, ...] = ()
+    k = counts.get(TOPIC_TF, 0)
+    tf_times = np.zeros(k)
+    tf7: dict[str, tuple[str, Array]] = {}
+    tf_static: dict[str, tuple[str, Array]] = {}
+    description = ""
+    i_frame = i_tf = 0
+    for _schema, channel, _message, decoded in reader.iter_decoded_messages(
+        topics=[TOPIC_FRAMES, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_DESCRIPTION],
+        log_time_order=False,
+    ):
+        topic = channel.topic
+        if topic == TOPIC_FRAMES:
+            if i_frame == 0:
+                frame_names = _names(decoded.name)
+            frame_numbers[i_frame] = decoded.frame
+            frame_times[i_frame] = decoded.time
+            pose7[0, i_frame] = _pose7(decoded.target)
+            pose7[1, i_frame] = _pose7(decoded.achieved)
+            lens[:, i_frame] = (decoded.focal_length_mm, decoded.focus_distance_m,
+                                decoded.f_stop)
+            frame_q.append(np.asarray(decoded.position, dtype=float))
+            i_frame += 1
+        elif topic == TOPIC_TF:
+            if decoded.transforms:
+                tf_times[i_tf] = _stamp(decoded.transforms[0].header.stamp)
+            for tr in decoded.transforms:
+                child = str(tr.child_frame_id)
+                if child not in tf7:
+                    tf7[child] = (str(tr.header.frame_id), np.zeros((k, 7)))
+                tf7[child][1][i_tf] = _transform7(tr.transform)
+            i_tf += 1
+        elif topic == TOPIC_TF_STATIC:
+            tf_static = {
+                str(tr.child_frame_id): (str(tr.header.frame_id),
+                                         matrix_from_pose7(np.array(_transform7(tr.transform))))
+                for tr in decoded.transforms}
+        else:
+            description = str(decoded.data)
+    all_metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
+    n_joints = len(names)
+    empty = np.zeros((0, n_joints))
+    return ReadTake(
+        profile=header.profile, library=header.library, joint_names=names, t=np.zeros(0),
+        q=empty, qd=empty, effort_sizes=np.zeros(0, dtype=np.int64),
+        trajectory_joint_names=names, trajectory_stamp=stamp, trajectory_t=t,
+        trajectory_q=q, trajectory_qd=qd, trajectory_qdd=qdd,
+        frame_numbers=frame_numbers[:i_frame], frame_times=frame_times[:i_frame],
+        frame_names=frame_names or names,
+        frame_q=np.array(frame_q, dtype=float).reshape(len(frame_q), -1) if frame_q
+        else empty,
+        target=matrix_from_pose7(pose7[0, :i_frame]),
+        achieved=matrix_from_pose7(pose7[1, :i_frame]),
+        focal_length_mm=lens[0, :i_frame], focus_distance_m=lens[1, :i_frame],
+        f_stop=lens[2, :i_frame], tf_times=tf_times[:i_tf],
+        tf={c: (p, matrix_from_pose7(v[:i_tf])) for c, (p, v) in tf7.items()},
+        tf_static=tf_static, robot_description=description,
+        metadata=all_metadata.get(METADATA_NAME, {}), all_metadata=all_metadata, topics={},
+    )
+
+
+def _decode_trajectory(
+    path: Path, data: bytes
+) -> tuple[tuple[str, ...], float, Array, Array, Array, Array]:
+    """A trajectory_msgs/JointTrajectory from its CDR bytes (little-endian), as arrays.
+
+    Each point holds three sequences of as many float64 as joint names (positions,
+    velocities, accelerations), an empty effort and time_from_start; the reader checks
+    every sequence length and reads the numbers with numpy, a block of points at a time.
+
+    Returns:
+        ``(joint_names, stamp, t, q, qd, qdd)``.
+    """
+    def bad(what: str) -> InputError:
+        return InputError(f"{path}: {TOPIC_TRAJECTORY} is not a joint trajectory camtraj "
+                          f"reads ({what})")
+
+    if data[:2] != b"\x00\x01":  # CDR, little-endian
+        raise bad("not little-endian CDR")
+    body = memoryview(data)[4:]
+    pos = 0
+
+    def u32() -> int:
+        nonlocal pos
+        pos += -pos % 4
+        (value,) = struct.unpack_from("<I", body, pos)
+        pos += 4
+        return int(value)
+
+    def text() -> str:
+        nonlocal pos
+        size = u32()
+        raw = bytes(body[pos: pos + size])
+        pos += size
+        return raw.rstrip(b"\x00").decode("utf-8")
+
+    sec, nanosec = u32(), u32()
+    stamp = float(np.int32(np.uint32(sec))) + nanosec * 1e-9
+    text()  # frame_id
+    names = tuple(text() for _ in range(u32()))
+    m, w = u32(), len(names)
+    # A point's layout depends only on where it starts modulo 8.
+    layouts: dict[int, tuple[list[int], list[int], int]] = {}
+    for phase in (0, 4):
+        at, counts, offs = phase, [], []
+        for _ in range(3):
+            at += -at % 4
+            counts.append(at - phase)
+            at += 4
+            at += -at % 8
+            offs.append(at - phase)
+            at += 8 * w
+        at += -at % 4
+        counts.append(at - phase)  # effort
+        at += 4
+        layouts[phase] = (counts, offs, at - phase)
+    starts = np.empty(m, dtype=np.int64)
+    phases = np.empty(m, dtype=np.int64)
+    p = pos
+    for i in range(m):
+        p += -p % 4
+        ph = p % 8
+        starts[i], phases[i] = p, ph
+        p += layouts[ph][2] + 8  # + time_from_start (two 4-byte fields)
+    if p > len(body):
+        raise bad("shorter than its points")
+    u8 = np.frombuffer(body, dtype=np.uint8)
+    t, out = np.empty(m), [np.empty((m, w)) for _ in range(3)]
+    lane = np.arange(8 * w)
+    for a in range(0, m, 65536):
+        block, block_phase = starts[a: a + 65536], phases[a: a + 65536]
+        for phase, (count_offs, offs, size) in layouts.items():
+            sel = block_phase == phase
+            if not np.any(sel):
+                continue
+            base = block[sel]
+            for c in count_offs:
+                got = u8[base[:, None] + c + np.arange(4)].copy().view("<u4")[:, 0]
+                want = 0 if c == count_offs[-1] else w
+                if np.any(got != want):
+                    raise bad("a point's sequence length differs from its joint names")
+            for arr, off in zip(out, offs, strict=True):
+                arr[a: a + 65536][sel] = u8[base[:, None] + off + lane].copy().view("<f8")
+            ts = u8[base[:, None] + size + np.arange(8)].copy().view("<u4")
+            t[a: a + 65536][sel] = ts[:, 0].astype(np.int32) + ts[:, 1] * 1e-9
+    return names, stamp, t, out[0], out[1], out[2]
+
+
 def describe(path: str | Path) -> dict[str, Any]:
     """A JSON-friendly summary of a camtraj MCAP file, for ``camtraj info``.
 

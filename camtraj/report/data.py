@@ -587,7 +587,7 @@ def _tf_poses(take: ReadTake, lower: float, upper: float) -> tuple[Array, IntArr
 def report_from_mcap(path: str | Path) -> ReportData:
     """Read a camtraj MCAP and build its report data (``camtraj report``)."""
     from camtraj.inputs import require_regular_file
-    from camtraj.mcap_io import read_take
+    from camtraj.mcap_io import read_take_for_report
 
     require_regular_file(path, "MCAP file", InputError)  # a FIFO would block the read
-    return from_take(read_take(path), path)
+    return from_take(read_take_for_report(path), path)
