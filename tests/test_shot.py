@@ -18,28 +18,12 @@ from camtraj.ik import path_margins, solve_path, solve_path_report
 from camtraj.ik.refine import refine
 from camtraj.ik.shot import candidates, chain_costs, choose, viterbi
 from camtraj.ik.shot_cost import ShotCost
-from camtraj.timing import Limits, TimingLimitError, time_shot
+from camtraj.timing import Limits
 
 from .conftest import camera_path, pose_error
-from .shot_set import SetShot, shot_set
+from .shot_set import SetShot, max_speed, shot_set
 
 WHIP = "whip_pan"  # 150 deg of pan in 8 frames: faster than any wrist axis, by design
-
-
-def max_speed(robot: Robot, q: np.ndarray, fps: float) -> float:
-    """The timing stage's maximum feasible speed of a joint path (fraction of real time).
-
-    A path whose spline leaves a position limit between frames still gets the speed its
-    velocities, accelerations and jerks allow (the timing stage reports it with the error);
-    one that no speed can make work (its run-up or run-out leaves a position limit: the
-    error carries no speed) gets 0.
-    """
-    times = np.arange(q.shape[0]) / fps
-    try:
-        return float(time_shot(q, times, Limits.from_robot(robot), mode="scale").report.max_speed)
-    except TimingLimitError as exc:
-        speed = float(exc.max_speed)
-        return speed if math.isfinite(speed) else 0.0
 
 
 @pytest.fixture(scope="module")
