@@ -30,7 +30,7 @@ import math
 import re
 import shlex
 import struct
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata as importlib_metadata
 from pathlib import Path
@@ -90,6 +90,10 @@ TOPICS: dict[str, str] = {
 }
 
 _CHUNK_SIZE = 1024 * 1024
+_WINDOW = 2048
+"""Servo samples per writing window: the writer encodes the take's messages a window of log
+times at a time (and the trajectory's points a window at a time), so its memory does not grow
+with the messages of the whole take."""
 # UsdGeom.Camera's fallback film back, horizontalAperture x verticalAperture [mm].
 _USD_APERTURE_MM = (20.955, 15.2908)
 _NS = 1_000_000_000
@@ -338,7 +342,7 @@ def _encode_trajectory(
     # A point's layout depends only on where it starts modulo 8: one template per phase.
     templates: dict[int, _Cdr] = {}
     starts = np.empty(len(ns), dtype=np.int64)
-    phases = np.empty(len(ns), dtype=np.int64)
+    phases = np.empty(len(ns), dtype=np.uint8)
     pos = head.position
     for i in range(len(ns)):
         phase = pos % 8
@@ -354,23 +358,29 @@ def _encode_trajectory(
         starts[i] = pos
         phases[i] = phase
         pos += len(tpl.buf)
-    body = np.empty(pos - head.position, dtype=np.uint8)
-    sec, nanosec = np.divmod(ns, _NS)
-    for phase, tpl in templates.items():
-        idx = np.flatnonzero(phases == phase)
-        rows = tpl.fill(
-            {
-                "positions": q[idx],
-                "velocities": qd[idx],
-                "accelerations": qdd[idx],
-                "time_from_start.sec": sec[idx],
-                "time_from_start.nanosec": nanosec[idx],
-            },
-            len(idx),
-        )
-        where = (starts[idx] - head.position)[:, None] + np.arange(rows.shape[1])
-        body[where] = rows
-    return bytes(head.buf) + body.tobytes()
+    message = bytearray(len(head.buf) + pos - head.position)
+    message[: len(head.buf)] = head.buf
+    body = np.frombuffer(message, dtype=np.uint8)
+    starts += len(head.buf) - head.position
+    # A window of points at a time: the scratch arrays stay small whatever the take's length.
+    for a in range(0, len(ns), _WINDOW):
+        b = min(a + _WINDOW, len(ns))
+        sec, nanosec = np.divmod(ns[a:b], _NS)
+        for phase, tpl in templates.items():
+            idx = np.flatnonzero(phases[a:b] == phase)
+            rows = tpl.fill(
+                {
+                    "positions": q[a + idx],
+                    "velocities": qd[a + idx],
+                    "accelerations": qdd[a + idx],
+                    "time_from_start.sec": sec[idx],
+                    "time_from_start.nanosec": nanosec[idx],
+                },
+                len(idx),
+            )
+            body[starts[a + idx][:, None] + np.arange(rows.shape[1])] = rows
+    del body
+    return bytes(message)
 
 
 def _encode_tf(
@@ -390,7 +400,8 @@ def _encode_tf(
     return _split_rows(tpl.fill(values, len(ns)))
 
 
-def _encode_shot_frames(take: TakeData) -> list[bytes]:
+def _encode_shot_frames(take: TakeData, frames: slice = slice(None)) -> list[bytes]:
+    """The /shot/frames messages of the film frames ``frames`` (default all)."""
     tpl = _Cdr()
     tpl.slot("frame", "<i4")
     tpl.slot("time", "<f8")
@@ -399,29 +410,35 @@ def _encode_shot_frames(take: TakeData) -> list[bytes]:
     tpl.slot("target", "<f8", 7)
     tpl.slot("achieved", "<f8", 7)
     tpl.slot("lens", "<f8", 3)
-    lens = np.stack([take.focal_length_mm, take.focus_distance_m, take.f_stop], axis=-1)
+    lens = np.stack([take.focal_length_mm[frames], take.focus_distance_m[frames],
+                     take.f_stop[frames]], axis=-1)
     values: dict[str, ArrayLike] = {
-        "frame": take.frame_numbers,
-        "time": take.frame_times,
-        "position": take.frame_q,
-        "target": pose7_from_matrix(take.target),
-        "achieved": pose7_from_matrix(take.achieved),
+        "frame": take.frame_numbers[frames],
+        "time": take.frame_times[frames],
+        "position": take.frame_q[frames],
+        "target": pose7_from_matrix(take.target[frames]),
+        "achieved": pose7_from_matrix(take.achieved[frames]),
         "lens": lens,
     }
-    return _split_rows(tpl.fill(values, len(take.frame_times)))
+    return _split_rows(tpl.fill(values, len(lens)))
 
 
-def _encode_camera_info(take: TakeData) -> list[bytes]:
-    """One CameraInfo per film frame, stamped at its take time, in the optical frame."""
+def _encode_camera_info(take: TakeData, frames: slice = slice(None)) -> list[bytes]:
+    """One CameraInfo per film frame of ``frames`` (default all), stamped at its take time,
+    in the optical frame."""
     assert take.horizontal_aperture_mm is not None and take.vertical_aperture_mm is not None
-    n = len(take.frame_times)
+    assert take.horizontal_aperture_offset_mm is not None
+    assert take.vertical_aperture_offset_mm is not None
+    frame_times = take.frame_times[frames]
+    n = len(frame_times)
     # One image size for the take (the first frame's aspect); an animated film back changes
     # the intrinsics, not the size.
     height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
-                               IMAGE_WIDTH)[0]) if n else 1
-    K = camera_matrices(take.focal_length_mm, take.horizontal_aperture_mm,
-                        take.vertical_aperture_mm, IMAGE_WIDTH, height,
-                        take.horizontal_aperture_offset_mm, take.vertical_aperture_offset_mm)
+                               IMAGE_WIDTH)[0]) if len(take.frame_times) else 1
+    K = camera_matrices(take.focal_length_mm[frames], take.horizontal_aperture_mm[frames],
+                        take.vertical_aperture_mm[frames], IMAGE_WIDTH, height,
+                        take.horizontal_aperture_offset_mm[frames],
+                        take.vertical_aperture_offset_mm[frames])
     P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
     tpl = _Cdr()
     tpl.slot_time("stamp")
@@ -437,7 +454,7 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
         tpl.u32(0)
     tpl.buf += b"\x00"  # roi.do_rectify: false
     values: dict[str, ArrayLike] = {
-        **_stamp_values("stamp", seconds_to_ns(take.frame_times)),
+        **_stamp_values("stamp", seconds_to_ns(frame_times)),
         "height": np.full(n, height),
         "width": np.full(n, IMAGE_WIDTH),
         "d": np.zeros((n, 5)),
@@ -770,72 +787,13 @@ def write_take_to(
         if not isinstance(key, str) or not isinstance(value, str):
             msg = f"metadata must map strings to strings; got {key!r}: {value!r}"
             raise TypeError(msg)
-    records = _build_records(take, robot)
-    _write_mcap(stream, records, dict(metadata), _robot_metadata(robot))
-
-
-@dataclass(frozen=True)
-class _Records:
-    """Encoded messages per topic: (log time [ns], CDR bytes) lists, in topic order."""
-
-    messages: dict[str, list[tuple[int, bytes]]]
-
-
-def _build_records(take: TakeData, robot: Robot) -> _Records:
-    names = take.joint_names
-    ns = seconds_to_ns(take.t)
-    messages: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in TOPICS}
-
-    messages[TOPIC_DESCRIPTION].append((0, _encode_string(robot_urdf(robot))))
-
-    statics = [
-        Transform(WORLD_FRAME, BASE_FRAME, take.base2world),
-        *static_transforms(robot),
-    ]
-    messages[TOPIC_TF_STATIC] = list(
-        zip(
-            [0],
-            _encode_tf(
-                [(s.parent, s.child) for s in statics],
-                np.zeros(1, dtype=np.int64),
-                [pose7_from_matrix(s.child2parent)[None, :] for s in statics],
-            ),
-            strict=True,
-        )
-    )
-
-    messages[TOPIC_TRAJECTORY].append(
-        (0, _encode_trajectory(names, ns, take.q, take.qd, take.qdd))
-    )
-    messages[TOPIC_JOINT_STATES] = list(
-        zip(ns.tolist(), _encode_joint_states(names, ns, take.q, take.qd), strict=True)
-    )
-
-    times = tf_times(take)
-    tf_ns = seconds_to_ns(times)
-    moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd, times))
-    messages[TOPIC_TF] = list(
-        zip(
-            tf_ns.tolist(),
-            _encode_tf(
-                [(m.parent, m.child) for m in moving],
-                tf_ns,
-                [pose7_from_matrix(m.child2parent) for m in moving],
-            ),
-            strict=True,
-        )
-    )
-
-    if len(take.frame_times):
-        frame_ns = seconds_to_ns(take.frame_times).tolist()
-        messages[TOPIC_FRAMES] = list(zip(frame_ns, _encode_shot_frames(take), strict=True))
-        messages[TOPIC_CAMERA_INFO] = list(zip(frame_ns, _encode_camera_info(take), strict=True))
-    return _Records(messages)
+    _write_mcap(stream, take, robot, dict(metadata), _robot_metadata(robot))
 
 
 def _write_mcap(
     stream: IO[bytes],
-    records: _Records,
+    take: TakeData,
+    robot: Robot,
     metadata: dict[str, str],
     robot_metadata: dict[str, str],
 ) -> None:
@@ -856,35 +814,82 @@ def _write_mcap(
             encoding="ros2msg",
             data=message_definition(schema_name).encode("utf-8"),
         )
-    channel_ids = {
-        topic: writer.register_channel(
+    channel_ids = [
+        writer.register_channel(
             topic=topic,
             message_encoding="cdr",
             schema_id=schema_ids[schema_name],
             metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
         )
         for topic, schema_name in TOPICS.items()
-    }
+    ]
     # All messages in log-time order; same-time messages in topic order, then sequence.
-    queue: list[tuple[int, int, int, bytes]] = []
-    for rank, topic in enumerate(TOPICS):
-        queue.extend(
-            (log_ns, rank, seq, data) for seq, (log_ns, data) in enumerate(records.messages[topic])
-        )
-    queue.sort(key=lambda item: (item[0], item[1], item[2]))
-    topics = list(TOPICS)
-    add = writer.add_message
-    for log_ns, rank, seq, data in queue:
-        add(
-            channel_id=channel_ids[topics[rank]],
-            log_time=log_ns,
-            data=data,
-            publish_time=log_ns,
-            sequence=seq,
-        )
+    for log_ns, rank, seq, data in _messages(take, robot):
+        writer.add_message(channel_id=channel_ids[rank], log_time=log_ns, data=data,
+                           publish_time=log_ns, sequence=seq)
     writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
     writer.add_metadata(ROBOT_METADATA_NAME, robot_metadata)
     writer.finish()  # type: ignore[no-untyped-call]
+
+
+def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, bytes]]:
+    """Every message of the take as ``(log time [ns], topic rank in TOPICS, sequence, CDR)``,
+    in log-time order (same-time messages in topic order, then sequence).
+
+    The messages at t = 0 (the URDF, /tf_static, the whole /joint_trajectory) come first; the
+    streams (/joint_states, /tf, /camera/camera_info, /shot/frames) are encoded a window of
+    log times at a time (:data:`_WINDOW` servo samples), so the messages in memory at once do
+    not grow with the take.
+    """
+    rank = {topic: i for i, topic in enumerate(TOPICS)}
+    names = take.joint_names
+    yield 0, rank[TOPIC_DESCRIPTION], 0, _encode_string(robot_urdf(robot))
+    statics = [Transform(WORLD_FRAME, BASE_FRAME, take.base2world), *static_transforms(robot)]
+    yield 0, rank[TOPIC_TF_STATIC], 0, _encode_tf(
+        [(s.parent, s.child) for s in statics], np.zeros(1, dtype=np.int64),
+        [pose7_from_matrix(s.child2parent)[None, :] for s in statics])[0]
+    servo_ns = seconds_to_ns(take.t)
+    yield 0, rank[TOPIC_TRAJECTORY], 0, _encode_trajectory(names, servo_ns, take.q, take.qd,
+                                                           take.qdd)
+
+    times = tf_times(take)
+    tf_ns = seconds_to_ns(times)
+    frame_ns = seconds_to_ns(take.frame_times)
+    tf_frames = [(m.parent, m.child) for m in link_transforms(robot, take.q[0])]
+    # Window w holds the messages logged in [servo_ns[w * _WINDOW], servo_ns[(w + 1) * _WINDOW]).
+    bounds = servo_ns[_WINDOW::_WINDOW]
+
+    def cuts(ns: NDArray[np.int64]) -> list[int]:
+        return [0, *np.searchsorted(ns, bounds, side="left").tolist(), len(ns)]
+
+    servo_cuts, tf_cuts, frame_cuts = cuts(servo_ns), cuts(tf_ns), cuts(frame_ns)
+    for w in range(len(bounds) + 1):
+        parts: list[tuple[NDArray[np.int64], int, int, list[bytes]]] = []
+        a, b = servo_cuts[w], servo_cuts[w + 1]
+        if b > a:
+            parts.append((servo_ns[a:b], rank[TOPIC_JOINT_STATES], a, _encode_joint_states(
+                names, servo_ns[a:b], take.q[a:b], take.qd[a:b])))
+        a, b = tf_cuts[w], tf_cuts[w + 1]
+        if b > a:
+            moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd,
+                                                              times[a:b]))
+            parts.append((tf_ns[a:b], rank[TOPIC_TF], a, _encode_tf(
+                tf_frames, tf_ns[a:b], [pose7_from_matrix(m.child2parent) for m in moving])))
+        a, b = frame_cuts[w], frame_cuts[w + 1]
+        if b > a:
+            parts.append((frame_ns[a:b], rank[TOPIC_CAMERA_INFO], a,
+                          _encode_camera_info(take, slice(a, b))))
+            parts.append((frame_ns[a:b], rank[TOPIC_FRAMES], a,
+                          _encode_shot_frames(take, slice(a, b))))
+        if not parts:
+            continue
+        log = np.concatenate([p[0] for p in parts])
+        ranks = np.concatenate([np.full(len(p[3]), p[1]) for p in parts])
+        seqs = np.concatenate([np.arange(p[2], p[2] + len(p[3])) for p in parts])
+        data = [d for p in parts for d in p[3]]
+        del parts
+        for i in np.lexsort((seqs, ranks, log)).tolist():
+            yield int(log[i]), int(ranks[i]), int(seqs[i]), data[i]
 
 
 # ---------------------------------------------------------------------------------------------
