@@ -625,3 +625,16 @@ def test_output_names_that_are_not_utf8_are_written_and_reported(tmp_path: Path)
     assert "wrote " in proc.stdout and "take\\udcff.mcap" in proc.stdout
     assert os.path.getsize(out) > 0
     assert json.loads(Path(summary).read_text())["status"] == "ok"
+
+
+def test_the_readme_states_the_frame_and_rate_caps_the_code_enforces() -> None:
+    """Issue 14 §5: the README said at most 1,000,000 frames while the code refused above
+    100,000; the README's numbers are read here and compared with the code's."""
+    from camtraj.convert import MAX_FPS
+    from camtraj.usd_shot import MAX_FRAMES
+
+    text = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    found = re.search(r"at most \*\*([\d,]+) frames\*\* and at most \*\*([\d,]+) fps\*\*", text)
+    assert found, "the README no longer states the frame and rate caps"
+    assert int(found[1].replace(",", "")) == MAX_FRAMES
+    assert float(found[2].replace(",", "")) == MAX_FPS

@@ -570,3 +570,26 @@ def test_an_instanceable_reference_is_checked_at_each_instance(tmp_path: Path) -
     stage.GetRootLayer().Save()
     obstacles = read_obstacles(path, ("/World/*",), [1.0])
     assert sorted(float(o.poses[0, 0, 3]) for o in obstacles) == [0.0, 7.0]
+
+
+def test_a_newline_in_a_file_name_keeps_every_error_one_line(tmp_path: Path) -> None:
+    """Every command's error names the file with its newline escaped (``\\n``), on one line."""
+    from tests.test_convert import error_line, run_all
+
+    shot = tmp_path / "shot\nname.usda"
+    shutil.copy(MAYA, shot)
+    (tmp_path / "robot\nfile.toml").write_text("[robot]\nname = 3\n", encoding="utf-8")
+    gone = tmp_path / "gone\nshot.usda"
+    runs = run_all({
+        "convert": ["convert", gone, "-o", tmp_path / "a.mcap"],
+        "check_robot": ["check", shot, "--robot", tmp_path / "robot\nfile.toml"],
+        "place": ["place", gone],
+        "report": ["report", tmp_path / "take\n.mcap", "-o", tmp_path / "r.html"],
+        "info": ["info", tmp_path / "take\n.mcap"],
+        "run_task": ["farm", "run-task", tmp_path / "job\n.json", 1],
+        "batch": ["batch", gone, "-o", tmp_path / "out"],
+    })
+    for name, proc in runs.items():
+        assert proc.returncode == 2, (name, proc.stderr)
+        line = error_line(proc)
+        assert re.search(r"(gone|robot|take|job)\\n", line), (name, line)
