@@ -1043,6 +1043,26 @@ def _names(values: Iterable[str]) -> tuple[str, ...]:
     return tuple(str(v) for v in values)
 
 
+def _check_topics(path: Path, present: set[str]) -> None:
+    """A camtraj take has every topic of :data:`TOPICS`."""
+    missing = [t for t in TOPICS if t not in present]
+    if missing:
+        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
+        raise InputError(msg)
+
+
+def _check_counts(path: Path, counts: Mapping[str, int]) -> None:
+    """A camtraj take has one message at t = 0 on each of /joint_trajectory,
+    /robot_description and /tf_static, and at least one on /joint_states."""
+    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
+        if counts.get(topic, 0) != 1:
+            msg = f"{path}: {topic} has {counts.get(topic, 0)} messages, expected 1"
+            raise InputError(msg)
+    if counts.get(TOPIC_JOINT_STATES, 0) < 1:
+        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
+        raise InputError(msg)
+
+
 def read_take(path: str | Path) -> ReadTake:
     """Read a camtraj MCAP file back, decoding every message with mcap_ros2.
 
@@ -1063,10 +1083,7 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
         msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
         raise InputError(msg)
     topics_present = {ch.topic for ch in summary.channels.values()}
-    missing = [t for t in TOPICS if t not in topics_present]
-    if missing:
-        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
-        raise InputError(msg)
+    _check_topics(path, topics_present)
 
     by_topic: dict[str, list[Any]] = {t: [] for t in topics_present}
     times: dict[str, list[tuple[int, int]]] = {t: [] for t in topics_present}
@@ -1091,15 +1108,9 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
             log_time_ns=lt,
             publish_time_ns=pt,
         )
-    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
-        if len(by_topic[topic]) != 1:
-            msg = f"{path}: {topic} has {len(by_topic[topic])} messages, expected 1"
-            raise InputError(msg)
+    _check_counts(path, {topic: len(messages) for topic, messages in by_topic.items()})
 
     js = by_topic[TOPIC_JOINT_STATES]
-    if not js:
-        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
-        raise InputError(msg)
     joint_names = _names(js[0].name)
     traj = by_topic[TOPIC_TRAJECTORY][0]
     points = traj.points
@@ -1187,21 +1198,11 @@ def _read_for_report(path: Path, stream: IO[bytes]) -> ReadTake:
     if summary is None or summary.statistics is None:
         msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
         raise InputError(msg)
-    topics_present = {ch.topic for ch in summary.channels.values()}
-    missing = [t for t in TOPICS if t not in topics_present]
-    if missing:
-        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
-        raise InputError(msg)
+    _check_topics(path, {ch.topic for ch in summary.channels.values()})
     counts = {summary.channels[cid].topic: int(n)
               for cid, n in summary.statistics.channel_message_counts.items()
               if cid in summary.channels}
-    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
-        if counts.get(topic, 0) != 1:
-            msg = f"{path}: {topic} has {counts.get(topic, 0)} messages, expected 1"
-            raise InputError(msg)
-    if counts.get(TOPIC_JOINT_STATES, 0) < 1:
-        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
-        raise InputError(msg)
+    _check_counts(path, counts)
 
     # The trajectory first: its bytes are freed before the other arrays grow.
     traj_data: bytes = b""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import time
 import tracemalloc
 from pathlib import Path
@@ -785,3 +786,22 @@ def test_data_end_crc_and_summary_offsets(written: Path) -> None:
     damaged[len(data.split(b"camtraj", 1)[0])] ^= 0x20  # "camtraj" -> "Camtraj"
     with pytest.raises(CRCValidationError):
         list(StreamReader(io.BytesIO(bytes(damaged)), validate_crcs=True).records)
+
+
+@pytest.mark.parametrize(("drop", "words"), [
+    ("/tf_static", "/tf_static has 0 messages, expected 1"),
+    ("/joint_trajectory", "/joint_trajectory has 0 messages, expected 1"),
+    ("/joint_states", "/joint_states has no messages"),
+])
+def test_both_readers_refuse_a_take_without_its_messages(
+    tmp_path: Path, written: Path, drop: str, words: str
+) -> None:
+    """read_take (every message decoded) and read_take_for_report (the summary's counts)
+    check the same counts and say the same thing."""
+    from tests.test_hardening_commands import _rewrite_mcap
+
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(written, bad, drop=drop)
+    for reader in (read_take, mcap_io.read_take_for_report):
+        with pytest.raises(InputError, match=re.escape(words)):
+            reader(bad)
