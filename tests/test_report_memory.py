@@ -11,6 +11,7 @@ arrays, and the peak resident memory of real ``camtraj report`` processes.
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -228,3 +229,38 @@ def test_report_memory_grows_far_less_than_the_file(takes: dict[int, Path],
         LONG - SHORT)
     assert per_frame < 10.0, (peak, per_frame)
     assert per_frame < 3 * size_per_frame, (per_frame, size_per_frame)
+
+
+def test_the_drawn_camera_path_keeps_every_runs_extremes() -> None:
+    """A long path is drawn through at most a few points per run of frames, and each run's
+    least and greatest x and y are among them (a spike of one frame stays drawn)."""
+    from camtraj.report.plots import path_frames
+
+    rng = np.random.default_rng(1)
+    for n in (2000, 50_000, 400_000):
+        xy = np.cumsum(rng.normal(size=(n, 2)), axis=0)
+        xy[n // 3] += 1e3  # a one-frame spike
+        runs = 500
+        idx = path_frames(xy, runs=runs, must=np.array([7, 8]))
+        assert np.all(np.diff(idx) > 0) and idx[0] == 0 and idx[-1] == n - 1
+        assert {7, 8, n // 3} <= set(idx.tolist())
+        if n <= 5 * runs:
+            assert idx.size == n
+            continue
+        assert idx.size <= 5 * runs + 3
+        starts = np.linspace(0, n, runs + 1).astype(int)
+        for a, b in itertools.pairwise(starts.tolist()):
+            mine = xy[idx[(idx >= a) & (idx < b)]]
+            np.testing.assert_array_equal(mine.min(axis=0), xy[a:b].min(axis=0))
+            np.testing.assert_array_equal(mine.max(axis=0), xy[a:b].max(axis=0))
+
+
+def test_the_page_of_a_long_take_stays_small(takes: dict[int, Path], tmp_path: Path) -> None:
+    """Ten times the frames: the page grows by little (the plots and the path views are
+    thinned to the picture's width, not the take's length)."""
+    size = {}
+    for n in (SHORT, LONG):
+        out = tmp_path / f"{n}.html"
+        assert run_cli("report", takes[n], "-o", out).returncode == 0
+        size[n] = out.stat().st_size
+    assert size[LONG] < 1.1 * size[SHORT], size

@@ -40,6 +40,8 @@ Array = NDArray[np.float64]
 
 #: At most this many film frames get a tick; longer shots tick every k-th frame.
 MAX_FRAME_TICKS = 240
+#: The camera path in the views is drawn through at most about 5x this many frames.
+PATH_RUNS = 600
 
 _WIDTH_IN = 12.0
 _DPI = 100
@@ -283,6 +285,32 @@ def limit_text(data: ReportData, axis: int, quantity: str) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
+def path_frames(xy: Array, runs: int = PATH_RUNS,
+                must: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
+    """Indices of the film frames the camera path is drawn through, in frame order.
+
+    A path of at most ``5 * runs`` frames keeps them all. A longer one is cut into ``runs``
+    runs of consecutive frames, and each run keeps its first frame and those with the least
+    and the greatest of each coordinate of ``xy`` (n, 2), so every excursion of the path
+    stays drawn; ``must`` frames are kept too.
+    """
+    n = xy.shape[0]
+    if n <= 5 * runs:
+        return np.arange(n, dtype=np.int64)
+    starts = np.linspace(0, n, runs + 1).astype(np.int64)[:-1]
+    lengths = np.diff(np.r_[starts, n])
+    where = np.arange(n)[:, None]
+    keep = [starts, np.array([n - 1])]
+    for reduce in (np.minimum, np.maximum):
+        value = np.repeat(reduce.reduceat(xy, starts, axis=0), lengths, axis=0)
+        first = np.minimum.reduceat(np.where(xy == value, where, n), starts, axis=0)
+        keep.append(np.minimum(first, n - 1).ravel())
+    if must is not None:
+        keep.append(must)
+    out: NDArray[np.int64] = np.unique(np.concatenate(keep).astype(np.int64))
+    return out
+
+
 def _view_points(data: ReportData) -> Array:
     """Every point a view must show [m], (p, 3)."""
     pts: list[Any] = [data.track, np.zeros((1, 3)), data.camera_path, data.poses.reshape(-1, 3)]
@@ -346,8 +374,12 @@ def path_svg(data: ReportData) -> str:
                 gid=f"view-{k}-frame-{data.pose_frames[j]}"))
         _stack_annotations(ax, notes)
         if cam.shape[0]:
-            ax.plot(cam[:, 0], cam[:, k], color=_BLUE, lw=1.8, zorder=3, gid=f"view-{k}-path",
-                    label="camera path")
+            mask = np.isin(data.frame_numbers, bad_frames)
+            edges = np.flatnonzero(np.diff(np.r_[False, mask, False]))  # runs' ends
+            drawn = path_frames(cam[:, [0, k]], must=np.clip(np.r_[edges, edges - 1], 0,
+                                                              cam.shape[0] - 1))
+            ax.plot(cam[drawn, 0], cam[drawn, k], color=_BLUE, lw=1.8, zorder=3,
+                    gid=f"view-{k}-path", label="camera path")
             look = data.camera_look
             step = max(1, cam.shape[0] // 12)
             ax.quiver(cam[::step, 0], cam[::step, k], look[::step, 0], look[::step, k],
@@ -357,10 +389,10 @@ def path_svg(data: ReportData) -> str:
                     label=f"first frame {data.frame_numbers[0]}")
             ax.plot(cam[-1, 0], cam[-1, k], "s", color=_BLUE, ms=6, zorder=4,
                     label=f"last frame {data.frame_numbers[-1]}")
-            mask = np.isin(data.frame_numbers, bad_frames)
             if np.any(mask):
-                ax.plot(cam[:, 0], np.where(mask, cam[:, k], np.nan), color=_RED, lw=3.0,
-                        zorder=4, label="frames over a limit", gid=f"view-{k}-over")
+                ax.plot(cam[drawn, 0], np.where(mask[drawn], cam[drawn, k], np.nan),
+                        color=_RED, lw=3.0, zorder=4, label="frames over a limit",
+                        gid=f"view-{k}-over")
             if data.unreachable:
                 um = np.isin(data.frame_numbers, data.unreachable)
                 ax.plot(cam[um, 0], cam[um, k], "x", color=_RED, ms=5, zorder=5,
