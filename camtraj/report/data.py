@@ -89,6 +89,8 @@ class ReportData:
         warnings: Things a person should know that do not stop the take.
         tolerance: Fraction above a limit that counts as over it.
         source: Where the data came from (the MCAP file, or "convert"/"check").
+        margins: The terminal's margins, when the take is done.
+        edges: The run-up's and run-out's own peak use, when they are planned.
     """
 
     shot: str
@@ -125,9 +127,8 @@ class ReportData:
     warnings: tuple[str, ...] = ()
     tolerance: float = LIMIT_RTOL
     source: str = "convert"
-    margins: dict[str, Any] | None = None  # convert's margins_summary, when the take is done
-    #: The run-up's and the run-out's peak use ("runup"/"runout" -> axis -> quantity ->
-    #: fraction of the limit), when they are planned.
+    margins: dict[str, Any] | None = None  # convert's margins_summary
+    # "runup"/"runout" -> axis -> quantity -> fraction of the limit
     edges: dict[str, dict[str, dict[str, float]]] | None = None
 
     def limit(self, quantity: str) -> Array:
