@@ -23,7 +23,9 @@ comes with a ratio against a baseline measured in the same run:
    for 240 to 23040 frames, this tree against ``--base-rev``, each in a new process.
 6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
    (``bench/bench_place.py``).
-7. What ``--report`` adds to the convert of the one-minute shot (``bench/bench_report.py``).
+7. What ``--report`` adds to the convert of the one-minute shot, and ``camtraj report`` of two
+   long takes against ``camtraj info`` of the same files: time ratio, peak memory per film
+   frame and at the frame cap (``bench/bench_report.py``).
 
 numpy, not numba: a numba version of the closed form measured 5x numpy on the old per-frame call
 mix but only 2.4x at >= 256 candidates per call, and costs ~11 s of JIT compilation per process;
@@ -1019,10 +1021,15 @@ def main(argv: list[str] | None = None) -> int:
         results["solver_performance"] = perf
         print_perf(perf)
 
-        from bench_report import bench_report, print_report
+        from bench_report import bench_report, bench_report_file, print_report, print_report_file
 
         results["report"] = bench_report(shot, work)
         print_report(results["report"])
+        try:
+            results["report_file"] = bench_report_file(work, load_make_samples(), quick)
+        except (subprocess.SubprocessError, OSError, ValueError) as exc:
+            results["report_file"] = {"skipped": f"{type(exc).__name__}: {exc}"[-300:]}
+        print_report_file(results["report_file"])
 
     est_shot = 240.0 / seq["shot"]["fps"] + 0.5
     batch = bench_batch(quick, est_shot)
