@@ -6,10 +6,10 @@ shortcuts; a proposed split is checked the same way at each group's placement; t
 file is converted by ``camtraj batch``, whose summaries are read back as JSON.
 
 The shots are one gentle move (``tests.shots.base_move``) at three places around the robot:
-4.3 m to the left of the track, 4.3 m to the right (near the arm's reach: each is reachable
-only from the bases on its side of the square search region, so each alone is placed at a
-different side) and straight ahead a little higher. A fourth shot 12 m further left no base
-that reaches the others can reach.
+4.3 m to the left of the track, 4.5 m to the right (the move drifts 0.2 m to the left), near
+the arm's reach: each is reachable only from the bases on its side of the square search region,
+so each alone is placed at a different side; and straight ahead a little higher. A fourth
+shot 12 m further left no base that reaches the others can reach.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from tests.shots import base_move, placement, write_shot
 
 TRUE = (-37.0, 52.0, 121.0)  # the middle of the search region (x, y [m], yaw [deg])
 HALF = 0.5  # the search region: TRUE +- HALF metres in the track's axes, yaw TRUE's
-SHIFTS = {"left": (0.0, 4.3, 0.0), "right": (0.0, -4.3, 0.0), "ahead": (0.0, 0.0, 0.3),
+SHIFTS = {"left": (0.0, 4.3, 0.0), "right": (0.0, -4.5, 0.0), "ahead": (0.0, 0.0, 0.3),
           "far": (0.0, 16.3, 0.0)}  # camera path offsets in the base frame of TRUE [m]
 FAR_BASE = 12.0  # the far shot's own square is this far left of TRUE's [m]
 
