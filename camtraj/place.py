@@ -544,7 +544,7 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
     picked = _spread(order, cand, keep, scr.step, scr.yaw_step)
     strides = {i: _subsample(problems[i])[0] for i in shots}
     single = len(shots) == 1
-    need = max(FULL_KEEP, top) if single else 2
+    need = max(FULL_KEEP, top) if single else 1  # a scene: only the best is refined further
     layouts = [Layout(float(cand[i, 0]), float(cand[i, 1]), float(cand[i, 2]),
                       tuple(shots[j] for j in np.argsort(slack[i], kind="stable")))
                for i in picked]
@@ -716,7 +716,7 @@ def columns(r: Result) -> str:
 @click.command("place", epilog="Exit codes: 0 a placement can do the shot (every shot of a "
                "scene); 2 bad input; 3 no placement can (the reason is printed; for a scene, "
                "the smallest split of its shots into layouts).")
-@click.argument("shots", nargs=-1, type=click.Path(dir_okay=False), metavar="SHOT...")
+@click.argument("shots", nargs=-1, type=click.Path(dir_okay=False), metavar="[SHOT]...")
 @click.option("--scene", type=click.Path(dir_okay=False), metavar="SCENE.toml",
               help="A scene file listing the shots and each one's camera, frames and timing "
                    "(instead of SHOT...).")

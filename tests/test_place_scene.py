@@ -228,3 +228,22 @@ def test_partitions_and_the_smallest_split() -> None:
     assert split is not None
     assert sorted(g for g, _ in split) == [(0, 1, 2), (3, 4)]
     assert all({0, 3} - set(g) for g in asked)  # the cheap test spared those searches
+
+
+def test_the_layout_name_round_trips_through_the_set_file() -> None:
+    """What a scene's place writes, tomllib and the set file reader read back alike."""
+    import tomllib
+
+    from camtraj.errors import InputError
+    from camtraj.set_file import SetFile, to_toml
+
+    text = to_toml(placement(1.0, 2.0, 30.0), {"search": {"yaw_deg": 30.0}},
+                   layout='sc "12" \\ day 2')
+    assert tomllib.loads(text)["placement"]["layout"] == 'sc "12" \\ day 2'
+    sf = SetFile.parse(text)
+    assert sf.layout == 'sc "12" \\ day 2' and sf.base2world is not None
+    assert np.allclose(sf.base2world, placement(1.0, 2.0, 30.0))
+    assert SetFile.parse("[placement]\nx = 1\n").layout is None
+    for bad in ('""', "3", '"a\\nb"'):
+        with pytest.raises(InputError, match=r"\[placement\] layout"):
+            SetFile.parse(f"[placement]\nlayout = {bad}\n")
