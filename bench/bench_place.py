@@ -16,6 +16,10 @@
   ``collision_samples_per_frame``: servo samples checked per film frame;
   ``collision_vs_ik``: its cost over the IK's cost per frame in the same run.
 
+``scene()`` returns ``place_scene_s`` (``camtraj place`` of a scene of five 10-second shots:
+consecutive parts of the one-minute long move), ``place_single_s`` (its first part placed
+alone, in the same run) and ``place_scene_ratio`` (the issue's goal: <= 2).
+
 Run it alone with ``python bench/bench_place.py``.
 """
 
@@ -45,18 +49,24 @@ def _make_samples() -> object:
 
 def _far_shot(path: Path, frames: int) -> np.ndarray:
     """The first ``frames`` / 24 s of the long move, placed far from the origin."""
-    from pxr import Gf, Usd, UsdGeom
-
     from camtraj.usd_shot import read_shot
 
     near = path.with_name("near.usda")
     _make_samples().write_long_shot(near, n_frames=frames, part=frames / 1440)  # type: ignore[attr-defined]
-    shot = read_shot(near)
+    return _write_far(path, read_shot(near).cam2world)
+
+
+def _write_far(path: Path, near2world: np.ndarray) -> np.ndarray:
+    """A Z-up metre stage of the camera poses ``near2world`` (n, 4, 4) moved to (-37, 52) m
+    and turned by 121 deg on the floor, frames 1..n at 24 fps; returns the moved poses."""
+    from pxr import Gf, Usd, UsdGeom
+
+    frames = near2world.shape[0]
     a = math.radians(121.0)
     T = np.eye(4)
     T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
     T[:2, 3] = (-37.0, 52.0)
-    cam2world = T @ shot.cam2world
+    cam2world = T @ near2world
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -70,6 +80,51 @@ def _far_shot(path: Path, frames: int) -> np.ndarray:
         op.Set(Gf.Matrix4d(cam2world[i].T.tolist()), Usd.TimeCode(i + 1))
     stage.GetRootLayer().Save()
     return cam2world
+
+
+def _place(*args: str) -> tuple[float, dict[str, object]]:
+    """Wall time [s] and JSON report of ``camtraj place ARGS --json -q``."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "camtraj", "place", *args, "--json", "-q"],
+                          capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if proc.returncode not in (0, 3) or not proc.stdout:
+        msg = f"camtraj place failed: {proc.stderr.strip()}"
+        raise RuntimeError(msg)
+    report: dict[str, object] = json.loads(proc.stdout)
+    return seconds, report
+
+
+def scene(log: Callable[[str], None] = print, shots: int = 5, frames: int = 240,
+          jobs: int = 2) -> dict[str, float]:
+    """``camtraj place`` of a scene: ``shots`` consecutive ``frames``-frame parts of the
+    one-minute long move (placed far from the origin), against placing its first (longest)
+    part alone, in the same run. ``place_scene_ratio`` is the issue's figure (goal <= 2)."""
+    from camtraj.usd_shot import read_shot
+
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(prefix="camtraj-bench-scene-") as tmp:
+        work = Path(tmp)
+        near = work / "near.usda"
+        _make_samples().write_long_shot(near, n_frames=shots * frames,  # type: ignore[attr-defined]
+                                        part=shots * frames / 1440)
+        moves = read_shot(near).cam2world
+        paths = []
+        for k in range(shots):
+            paths.append(work / f"part{k + 1}.usda")
+            _write_far(paths[-1], moves[k * frames:(k + 1) * frames])
+        log(f"camtraj place of part 1 alone ({frames} frames), --jobs {jobs}")
+        out["place_single_s"], _ = _place(str(paths[0]), "-j", str(jobs))
+        log(f"camtraj place of the {shots}-part scene, --jobs {jobs}")
+        out["place_scene_s"], rep = _place(*map(str, paths), "-j", str(jobs))
+        out["place_scene_ratio"] = out["place_scene_s"] / out["place_single_s"]
+        out["place_scene_ok"] = float(rep["status"] == "ok")
+        out["place_scene_solves"] = float(rep["evaluated"])  # type: ignore[arg-type]
+        placement = rep["placement"]
+        if isinstance(placement, dict):
+            out["place_scene_worst_speed"] = min(
+                float(s["max_speed"] or 0.0) for s in placement["shots"])
+    return out
 
 
 def _sheet(path: Path, cam2world: np.ndarray) -> None:
@@ -109,20 +164,12 @@ def run(log: Callable[[str], None] = print, frames: int = 240, jobs: int = 2) ->
         shot = work / "far.usda"
         cam2world = _far_shot(shot, frames)
         log(f"camtraj place on a {frames}-frame shot, --jobs {jobs}")
-        t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "camtraj", "place", str(shot), "--json",
-                               "-q", "-j", str(jobs)], capture_output=True, text=True,
-                              check=False)
-        out["place_wall_s"] = time.perf_counter() - t0
-        if proc.returncode not in (0, 3) or not proc.stdout:
-            msg = f"camtraj place failed: {proc.stderr.strip()}"
-            raise RuntimeError(msg)
-        rep = json.loads(proc.stdout)
+        out["place_wall_s"], rep = _place(str(shot), "-j", str(jobs))
         out["place_ok"] = float(rep["status"] == "ok")
-        out["place_candidates"] = float(rep["evaluated"])
-        out["place_candidates_per_s"] = rep["evaluated"] / out["place_wall_s"]
-        out["place_screened"] = float(rep["screened"])
-        best = rep["placements"][0]
+        out["place_candidates"] = float(rep["evaluated"])  # type: ignore[arg-type]
+        out["place_candidates_per_s"] = out["place_candidates"] / out["place_wall_s"]
+        out["place_screened"] = float(rep["screened"])  # type: ignore[arg-type]
+        best = rep["placements"][0]  # type: ignore[index]
         out["place_best_speed"] = float(best["max_speed"] or 0.0)
 
         log("one full solve at the best placement (baseline)")
@@ -155,5 +202,5 @@ def run(log: Callable[[str], None] = print, frames: int = 240, jobs: int = 2) ->
 
 
 if __name__ == "__main__":
-    for key, value in run().items():
+    for key, value in {**run(), **scene()}.items():
         print(f"{key:32} {value:10.4g}")

@@ -21,8 +21,8 @@ comes with a ratio against a baseline measured in the same run:
    run in a subprocess), with how many run at real time. 5b: the default's frames/s on the
    1440-frame path in a fresh call and warm, ``paper``'s, and the cost and memory per frame
    for 240 to 23040 frames, this tree against ``--base-rev``, each in a new process.
-6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
-   (``bench/bench_place.py``).
+6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame, and on a
+   scene of five 10-second shots against its first shot alone (``bench/bench_place.py``).
 7. What ``--report`` adds to the convert of the one-minute shot, and ``camtraj report`` of two
    long takes against ``camtraj info`` of the same files: time ratio, peak memory per film
    frame and at the frame cap (``bench/bench_report.py``).
@@ -933,8 +933,9 @@ def bench_place(quick: bool) -> dict[str, Any]:
     try:
         spec.loader.exec_module(module)
         frames = 120 if quick else 240
-        return {"frames": frames,
-                "result": module.run(lambda s: log(f"table 6: {s}"), frames=frames)}
+        result = module.run(lambda s: log(f"table 6: {s}"), frames=frames)
+        result.update(module.scene(lambda s: log(f"table 6: {s}"), frames=frames))
+        return {"frames": frames, "result": result}
     except Exception as exc:
         return {"skipped": f"bench_place failed: {type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc(limit=3)}
@@ -955,6 +956,11 @@ def print_place(res: dict[str, Any]) -> None:
          fmt(r["collision_ms_per_frame"])],
         ["  servo samples checked per frame", fmt(r["collision_samples_per_frame"])],
         ["  its cost / the IK's per frame [x]", fmt(r["collision_vs_ik"])],
+        ["scene of 5 shots: place time [s] (its first shot alone)",
+         f"{fmt(r['place_scene_s'])} ({fmt(r['place_single_s'])})"],
+        ["  scene / first shot alone [x] (goal <= 2)", fmt(r["place_scene_ratio"])],
+        ["  shot placements solved; one layout for all",
+         f"{r['place_scene_solves']:.0f}; {'yes' if r['place_scene_ok'] else 'no'}"],
     ]
     table(f"6. Placement search ({res['frames']} frames, --jobs 2, default region) and "
           "collision checks (bench/bench_place.py)", ["figure", "value"], rows,

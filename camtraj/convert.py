@@ -86,9 +86,10 @@ def load_placement(options: ConvertOptions) -> Placement:
         x, y, z, yaw = options.placement
         return Placement.from_xyz_yaw(x, y, z, yaw)
     if options.set_file is not None:
-        base2world = SetFile.read(options.set_file).base2world
-        if base2world is not None:
-            return Placement(base2world, str(options.set_file))
+        sf = SetFile.read(options.set_file)
+        if sf.base2world is not None:
+            layout = "" if sf.layout is None else f", layout {sf.layout}"
+            return Placement(sf.base2world, f"{options.set_file}{layout}")
     return Placement()
 
 

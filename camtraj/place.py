@@ -26,7 +26,7 @@ import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -34,10 +34,15 @@ from numpy.typing import NDArray
 
 from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
 from camtraj.ik import PathSolution, solve_path_report
+from camtraj.inputs import one_line
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon
 from camtraj.timing import Limits, TimingLimitError, time_shot
+
+if TYPE_CHECKING:
+    from camtraj.options import ConvertOptions
+    from camtraj.usd_shot import Shot
 
 Array = NDArray[np.float64]
 
@@ -76,6 +81,8 @@ class Problem:
     start: Array | None = None
     obstacles: tuple[Any, ...] = ()
     clearance: float = 0.0
+    name: str = ""  # the shot, for messages
+    timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
 
 
 @dataclass(frozen=True)
@@ -160,18 +167,19 @@ def _binding(peak_use: dict[str, dict[str, float]]) -> str:
 _WORKER: dict[str, Any] = {}
 
 
-def _init_worker(problem: Problem) -> None:
+def _init_worker(problems: tuple[Problem, ...]) -> None:
     _WORKER.clear()
-    _WORKER["problem"] = problem
+    _WORKER["problems"] = problems
+    _WORKER["models"] = {}
 
 
 def _model(problem: Problem) -> Any:
     from camtraj.collision import CollisionModel
 
-    if "model" not in _WORKER or _WORKER.get("model_for") is not problem:
-        _WORKER["model"] = CollisionModel(problem.robot, list(problem.obstacles))
-        _WORKER["model_for"] = problem
-    return _WORKER["model"]
+    models = _WORKER.setdefault("models", {})
+    if id(problem) not in models:
+        models[id(problem)] = (problem, CollisionModel(problem.robot, list(problem.obstacles)))
+    return models[id(problem)][1]
 
 
 def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) -> Result:
@@ -203,7 +211,7 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
         speed = exc.max_speed if math.isfinite(exc.max_speed) else 0.0
         return Result(x, y, yaw_deg, full, 1.0, True, False, speed, "position", marg, str(exc))
     rep = take.report
-    feasible = not rep.limiting
+    feasible = not rep.limiting or problem.timing != "shot"
     reason = "" if feasible else "; ".join(v.describe() for v in rep.limiting[:2])
     free = True
     if problem.obstacles:
@@ -225,9 +233,13 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
                   _binding(rep.peak_use), marg, reason)
 
 
-def _evaluate_batch(batch: list[tuple[float, float, float, int]]) -> list[Result]:
-    problem = _WORKER["problem"]
-    return [evaluate(problem, *c) for c in batch]
+Task = tuple[int, float, float, float, int]
+"""One solve: (shot index, x [m], y [m], yaw [deg], frame stride)."""
+
+
+def _evaluate_batch(batch: list[Task]) -> list[Result]:
+    problems = _WORKER["problems"]
+    return [evaluate(problems[i], x, y, yaw, stride) for i, x, y, yaw, stride in batch]
 
 
 def _spread(order: NDArray[np.intp], cand: Array, keep: int, dxy: float,
@@ -244,6 +256,82 @@ def _spread(order: NDArray[np.intp], cand: Array, keep: int, dxy: float,
             if len(picked) == keep:
                 break
     return picked
+
+
+# ---------------------------------------------------------------------------------------------
+# One placement for one or more shots: solved shot by shot, best bound first
+# ---------------------------------------------------------------------------------------------
+
+_UNSOLVED = (math.inf,) * 5  # the bound of a placement no shot has been solved at
+
+
+@dataclass
+class Layout:
+    """One placement and what is known of it for each shot of a scene.
+
+    ``results`` holds the shots solved so far (by shot index); they are solved in ``order``
+    (the tightest first), and :meth:`key`, the worst of their keys in each component, only
+    falls as more are solved: a placement whose key is already below the ones to beat is not
+    solved further.
+    """
+
+    x: float
+    y: float
+    yaw_deg: float
+    order: tuple[int, ...]
+    results: dict[int, Result] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        return len(self.results) == len(self.order)
+
+    @property
+    def ok(self) -> bool:
+        return self.complete and all(r.ok for r in self.results.values())
+
+    def key(self) -> tuple[float, ...]:
+        """Larger is better: per component the worst solved shot's (every shot reachable,
+        none colliding, all feasible, the worst shot's speed, the smallest margin)."""
+        keys = [r.key() for r in self.results.values()]
+        return tuple(min(k) for k in zip(*keys, strict=True)) if keys else _UNSOLVED
+
+    def next_shot(self) -> int:
+        return next(i for i in self.order if i not in self.results)
+
+    @property
+    def limiting(self) -> int:
+        """The shot whose result limits the placement."""
+        return min(self.results, key=lambda i: self.results[i].key())
+
+    def worst_first(self) -> tuple[int, ...]:
+        """The shots in the order of their results, worst first (for the next stage)."""
+        return tuple(sorted(self.order, key=lambda i: self.results[i].key()
+                            if i in self.results else _UNSOLVED))
+
+    def base2world(self, z: float) -> Array:
+        return pose(self.x, self.y, z, self.yaw_deg)
+
+
+def _race(runner: _Runner, layouts: list[Layout], strides: dict[int, int], need: int) -> None:
+    """Solve the layouts' shots until the ``need`` best complete layouts are known.
+
+    Placements no shot has been solved at go first, all together (one shot each); then the
+    open placement with the best bound gets its next shot, ``jobs`` at a time. A placement
+    stops once its bound is no better than the ``need``-th best complete key: the worst of the
+    shots solved already rules it out, so its other shots are never solved.
+    """
+    while True:
+        done = sorted((lay.key() for lay in layouts if lay.complete), reverse=True)
+        bar = done[need - 1] if len(done) >= need else None
+        open_ = [lay for lay in layouts if not lay.complete and (bar is None or lay.key() > bar)]
+        if not open_:
+            return
+        todo = [lay for lay in open_ if not lay.results] or sorted(
+            open_, key=Layout.key, reverse=True)[:runner.jobs]
+        tasks = [(lay.next_shot(), lay.x, lay.y, lay.yaw_deg, strides[lay.next_shot()])
+                 for lay in todo]
+        for lay, task, result in zip(todo, tasks, runner.run(tasks), strict=True):
+            lay.results[task[0]] = result
 
 
 # ---------------------------------------------------------------------------------------------
@@ -277,15 +365,16 @@ class PlaceReport:
 
 
 class _Runner:
-    """Evaluates candidates inline (one job) or in worker processes, with one progress bar."""
+    """Solves (shot, placement) tasks inline (one job) or in worker processes, with one
+    progress bar; ``problems`` are the shots (one per shot of a scene)."""
 
-    def __init__(self, problem: Problem, jobs: int, progress: bool) -> None:
+    def __init__(self, problems: tuple[Problem, ...], jobs: int, progress: bool) -> None:
         from tqdm import tqdm
 
-        self.problem = problem
+        self.problems = problems
         self.jobs = jobs
         self.pool: cf.ProcessPoolExecutor | None = None
-        self.bar = tqdm(total=0, unit="placement", desc="camtraj place", disable=not progress,
+        self.bar = tqdm(total=0, unit="solve", desc="camtraj place", disable=not progress,
                         file=sys.stderr, dynamic_ncols=True, leave=False)
         self.count = 0
         if jobs > 1:
@@ -293,22 +382,23 @@ class _Runner:
 
             with _worker_environment():
                 self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_mp_context(),
-                                                   initializer=_init_worker, initargs=(problem,))
+                                                   initializer=_init_worker,
+                                                   initargs=(problems,))
 
-    def run(self, cands: list[tuple[float, float, float, int]]) -> list[Result]:
-        self.bar.total += len(cands)
+    def run(self, tasks: list[Task]) -> list[Result]:
+        self.bar.total += len(tasks)
         self.bar.refresh()
-        self.count += len(cands)
+        self.count += len(tasks)
         if self.pool is None:
-            if _WORKER.get("problem") is not self.problem:
-                _init_worker(self.problem)
+            if _WORKER.get("problems") is not self.problems:
+                _init_worker(self.problems)
             out = []
-            for c in cands:
-                out.append(evaluate(self.problem, *c))
+            for i, x, y, yaw, stride in tasks:
+                out.append(evaluate(self.problems[i], x, y, yaw, stride))
                 self.bar.update(1)
             return out
-        size = max(1, math.ceil(len(cands) / (4 * self.jobs)))
-        chunks = [cands[i:i + size] for i in range(0, len(cands), size)]
+        size = max(1, math.ceil(len(tasks) / (4 * self.jobs)))
+        chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
         futures = {self.pool.submit(_evaluate_batch, ch): k for k, ch in enumerate(chunks)}
         results: list[list[Result]] = [[] for _ in chunks]
         for fut in cf.as_completed(futures):
@@ -322,34 +412,74 @@ class _Runner:
             self.pool.shutdown(cancel_futures=True)
 
 
-def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_axis: str,
-           jobs: int = 1, progress: bool = False, top: int = 3) -> tuple[list[Result],
-                                                                         int, int, dict[str, Any]]:
-    """Coarse-to-fine search. Returns ranked full results, evaluated and screened counts and
-    the search region.
+@dataclass(frozen=True)
+class Screen:
+    """The cheap tests of a coarse grid for the shots of a scene (every frame subsampled).
+
+    ``slack`` (G, S): per grid placement and shot, how far the shot's camera path stays
+    inside the robot's reach [m]; ``floor`` (G,): the rail inside the region, off the
+    keep-outs. ``ok``: both, for every shot.
+    """
+
+    shots: tuple[int, ...]
+    grid: Array  # (G, 3): x, y [m], yaw [deg]
+    slack: Array
+    floor: NDArray[np.bool_]
+    step: float
+    yaw_step: float
+    yaw_range: tuple[float, float]
+    region: Array | None
+    keep_out: list[Array]
+    info: dict[str, Any]
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        out: NDArray[np.bool_] = np.all(self.slack >= 0, axis=1) & self.floor
+        return out
+
+
+def _subsample(problem: Problem) -> tuple[int, Array]:
+    """A shot's frame stride in the coarse stages and its camera positions (k, 3) there."""
+    n = problem.cam2world.shape[0]
+    stride = max(1, math.ceil(n / COARSE_FRAMES))
+    return stride, problem.cam2world[::stride, :3, 3]
+
+
+def screen(problems: tuple[Problem, ...], shots: tuple[int, ...], set_file: SetFile, *,
+           meters_per_unit: float, up_axis: str) -> Screen:
+    """The cheap tests over a coarse grid of the placements that might serve every shot in
+    ``shots`` (inside the reach of each one's camera path and the floor region).
 
     Raises:
-        PlacementError: The cheap tests rule out every placement (the reason says which).
+        PlacementError: A shot no placement can do, or no placement in reach of every shot.
     """
-    robot = problem.robot
+    robot = problems[shots[0]].robot
+    base_z = problems[shots[0]].base_z
     env = reach_envelope(robot)
-    pts = problem.cam2world[:, :3, 3]
-    n = pts.shape[0]
-    stride = max(1, math.ceil(n / COARSE_FRAMES))
-    sub = pts[::stride]
-    check_can_reach(env, pts, problem.base_z)
-
+    reach = env.reach + env.offset + max(abs(env.axis_lo), abs(env.axis_hi))
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+    for i in shots:
+        pts = problems[i].cam2world[:, :3, 3]
+        try:
+            check_can_reach(env, pts, base_z)
+        except PlacementError as exc:
+            msg = f"{problems[i].name}: {exc}" if len(shots) > 1 else str(exc)
+            raise PlacementError(msg) from None
+        lo = np.maximum(lo, pts[:, :2].min(axis=0) - reach)
+        hi = np.minimum(hi, pts[:, :2].max(axis=0) + reach)
+    if np.any(lo > hi):
+        msg = "no placement is within the robot's reach of every shot's camera path"
+        raise PlacementError(msg)
     src = set_file.source
     region = None if set_file.region is None else floor_polygon(
         set_file.region, meters_per_unit, up_axis, src, "floor.region")
     keep_out = [floor_polygon(p, meters_per_unit, up_axis, src, f"floor.keep_out[{i}]")
                 for i, p in enumerate(set_file.keep_out)]
-    reach = env.reach + env.offset + max(abs(env.axis_lo), abs(env.axis_hi))
-    lo, hi = pts[:, :2].min(axis=0) - reach, pts[:, :2].max(axis=0) + reach
     if region is not None:
         lo, hi = np.maximum(lo, region.min(axis=0)), np.minimum(hi, region.max(axis=0))
         if np.any(lo > hi):
-            msg = "the set file's floor region is out of the robot's reach of the camera path"
+            msg = ("the set file's floor region is out of the robot's reach of the camera path"
+                   + ("s" if len(shots) > 1 else ""))
             raise PlacementError(msg)
     dxy = max(0.25, float(np.max(hi - lo)) / 40.0)
     yaw_lo, yaw_hi = set_file.yaw_range_deg or (-180.0, 180.0 - YAW_STEP_DEG)
@@ -359,55 +489,105 @@ def search(problem: Problem, set_file: SetFile, *, meters_per_unit: float, up_ax
     xs = np.arange(lo[0], hi[0] + 1e-9, dxy)
     ys = np.arange(lo[1], hi[1] + 1e-9, dxy)
     grid = np.stack(np.meshgrid(xs, ys, yaws, indexing="ij"), axis=-1).reshape(-1, 3)
-    slack = np.concatenate([reach_slack(env, sub, g[:, 0], g[:, 1], g[:, 2], problem.base_z)
-                            for g in np.array_split(grid, max(1, len(grid) // 4000))])
-    ok = slack >= 0
-    ok[ok] = floor_ok(robot, grid[ok, 0], grid[ok, 1], grid[ok, 2], region, keep_out)
-    screened = len(grid)
+    slack = _slack(problems, shots, env, grid)
+    floor = np.zeros(len(grid), dtype=bool)
+    reachable = np.all(slack >= 0, axis=1)
+    floor[reachable] = floor_ok(robot, grid[reachable, 0], grid[reachable, 1],
+                                grid[reachable, 2], region, keep_out)
     info = {"x": [float(lo[0]), float(hi[0])], "y": [float(lo[1]), float(hi[1])],
             "yaw_deg": [float(yaw_lo), float(yaw_hi)], "step_m": dxy, "yaw_step_deg": dyaw,
-            "grid": screened, "passed_cheap_tests": int(ok.sum())}
+            "grid": len(grid), "passed_cheap_tests": int(floor.sum())}
+    return Screen(shots, grid, slack, floor, dxy, dyaw, (yaw_lo, yaw_hi), region, keep_out,
+                  info)
+
+
+def _slack(problems: tuple[Problem, ...], shots: tuple[int, ...], env: Any,
+           places: Array) -> Array:
+    """(N, S) reach slack of each placement (N, 3) for each shot: every shot's subsampled
+    frames in one vectorised test."""
+    subs = [_subsample(problems[i])[1] for i in shots]
+    points = np.concatenate(subs)
+    sizes = [len(p) for p in subs]
+    base_z = problems[shots[0]].base_z
+    chunk = max(1, 48_000 // len(points))
+    return np.concatenate([reach_slack(env, points, g[:, 0], g[:, 1], g[:, 2], base_z, sizes)
+                           for g in np.array_split(places, max(1, -(-len(places) // chunk)))])
+
+
+def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
+           meters_per_unit: float, up_axis: str, top: int = 3) -> tuple[list[Layout], int,
+                                                                        dict[str, Any]]:
+    """Coarse-to-fine search of one placement for the shots ``shots`` of ``runner``'s
+    problems. Returns the ranked placements solved on every frame of every shot (at least one),
+    the number of candidates screened and the search region.
+
+    With one shot every finalist is solved in full (``top`` of them listed); with more, the
+    finalists race shot by shot and only the best is solved in full for every shot.
+
+    Raises:
+        PlacementError: The cheap tests rule out every placement (the reason says which).
+    """
+    problems = runner.problems
+    robot = problems[shots[0]].robot
+    env = reach_envelope(robot)
+    scr = screen(problems, shots, set_file, meters_per_unit=meters_per_unit, up_axis=up_axis)
+    ok = scr.ok
     if not ok.any():
-        msg = ("no placement in the search region keeps the whole camera path within the "
-               "robot's reach" + (" with the rail inside the floor region and off the keep-out "
-                                  "areas" if region is not None or keep_out else ""))
+        msg = ("no placement in the search region keeps the whole camera path"
+               + (" of every shot" if len(shots) > 1 else "") + " within the robot's reach"
+               + (" with the rail inside the floor region and off the keep-out areas"
+                  if scr.region is not None or scr.keep_out else ""))
         raise PlacementError(msg)
-    cand = grid[ok]
-    order = np.argsort(-slack[ok], kind="stable")
+    cand, slack = scr.grid[ok], scr.slack[ok]
+    order = np.argsort(-slack.min(axis=1), kind="stable")
     keep = min(COARSE_KEEP, max(8, len(cand) // 4))  # a small region needs fewer
-    picked = _spread(order, cand, keep, dxy, dyaw)
-    runner = _Runner(problem, jobs, progress)
-    try:
-        coarse = runner.run([(*map(float, cand[i]), stride) for i in picked])
-        for keep, frac in REFINE:  # pattern search: +-x, +-y, +-yaw around the best few
-            best = _distinct(sorted(coarse, key=lambda r: r.key(), reverse=True), keep)
-            h, hy = dxy * frac, dyaw * frac
-            steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0),
-                                                       (0, -h, 0)]
-            steps += [(0, 0, hy), (0, 0, -hy)] if hy else []
-            arr = np.array([(r.x + a, r.y + b, r.yaw_deg + c) for r in best for a, b, c in steps])
-            good = (reach_slack(env, sub, arr[:, 0], arr[:, 1], arr[:, 2], problem.base_z) >= 0)
-            good &= floor_ok(robot, arr[:, 0], arr[:, 1], arr[:, 2], region, keep_out)
-            if set_file.yaw_range_deg is not None:
-                good &= (arr[:, 2] >= yaw_lo - 1e-9) & (arr[:, 2] <= yaw_hi + 1e-9)
-            else:
-                arr[:, 2] = (arr[:, 2] + 180.0) % 360.0 - 180.0
-            seen = {(round(r.x, 6), round(r.y, 6), round(r.yaw_deg, 6)) for r in coarse}
-            todo = {(round(float(c[0]), 6), round(float(c[1]), 6), round(float(c[2]), 6)): c
-                    for c in arr[good]}
-            coarse += runner.run([(*map(float, c), stride) for k, c in todo.items()
-                                  if k not in seen])
-        ranked = sorted(coarse, key=lambda r: r.key(), reverse=True)
-        finalists = _distinct(ranked, max(FULL_KEEP, min(top, len(ranked))))
-        full = runner.run([(r.x, r.y, r.yaw_deg, 1) for r in finalists])
-        evaluated = runner.count
-    finally:
-        runner.close()
-    return sorted(full, key=lambda r: r.key(), reverse=True)[:top], evaluated, screened, info
+    picked = _spread(order, cand, keep, scr.step, scr.yaw_step)
+    strides = {i: _subsample(problems[i])[0] for i in shots}
+    single = len(shots) == 1
+    need = max(FULL_KEEP, top) if single else 1  # a scene: only the best is refined further
+    layouts = [Layout(float(cand[i, 0]), float(cand[i, 1]), float(cand[i, 2]),
+                      tuple(shots[j] for j in np.argsort(slack[i], kind="stable")))
+               for i in picked]
+    _race(runner, layouts, strides, need)
+    yaw_lo, yaw_hi = scr.yaw_range
+    for keep, frac in REFINE:  # pattern search: +-x, +-y, +-yaw around the best few
+        best = _distinct(_ranked(layouts), keep)
+        h, hy = scr.step * frac, scr.yaw_step * frac
+        steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0), (0, -h, 0)]
+        steps += [(0, 0, hy), (0, 0, -hy)] if hy else []
+        arr = np.array([(r.x + a, r.y + b, r.yaw_deg + c) for r in best for a, b, c in steps])
+        orders = [r.worst_first() for r in best for _ in steps]
+        good = np.all(_slack(problems, shots, env, arr) >= 0, axis=1)
+        good &= floor_ok(robot, arr[:, 0], arr[:, 1], arr[:, 2], scr.region, scr.keep_out)
+        if set_file.yaw_range_deg is not None:
+            good &= (arr[:, 2] >= yaw_lo - 1e-9) & (arr[:, 2] <= yaw_hi + 1e-9)
+        else:
+            arr[:, 2] = (arr[:, 2] + 180.0) % 360.0 - 180.0
+        seen = {_where(r) for r in layouts}
+        for c, o, g in zip(arr, orders, good, strict=True):
+            lay = Layout(float(c[0]), float(c[1]), float(c[2]), o)
+            if g and _where(lay) not in seen:
+                seen.add(_where(lay))
+                layouts.append(lay)
+        _race(runner, layouts, strides, need)
+    ranked = _ranked(layouts)
+    finalists = _distinct(ranked, max(FULL_KEEP, min(top, len(ranked))))
+    full = [Layout(r.x, r.y, r.yaw_deg, r.worst_first()) for r in finalists]
+    _race(runner, full, dict.fromkeys(shots, 1), len(full) if single else 1)
+    return _ranked(full)[:top], len(scr.grid), scr.info
 
 
-def _distinct(ranked: list[Result], k: int) -> list[Result]:
-    out: list[Result] = []
+def _where(lay: Layout) -> tuple[float, float, float]:
+    return round(lay.x, 6), round(lay.y, 6), round(lay.yaw_deg, 6)
+
+
+def _ranked(layouts: list[Layout]) -> list[Layout]:
+    """The complete layouts, best first."""
+    return sorted((lay for lay in layouts if lay.complete), key=Layout.key, reverse=True)
+
+
+def _distinct(ranked: list[Layout], k: int) -> list[Layout]:
+    out: list[Layout] = []
     for r in ranked:
         if all(abs(r.x - o.x) > 1e-9 or abs(r.y - o.y) > 1e-9 or abs(r.yaw_deg - o.yaw_deg)
                > 1e-9 for o in out):
@@ -415,6 +595,48 @@ def _distinct(ranked: list[Result], k: int) -> list[Result]:
         if len(out) == k:
             break
     return out
+
+
+def default_jobs(jobs: int | None) -> int:
+    """Worker processes: the CPUs this process may use unless given.
+
+    Raises:
+        InputError: Fewer than one.
+    """
+    if jobs is None:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+    if jobs < 1:
+        msg = f"jobs must be at least 1, got {jobs}"
+        raise InputError(msg)
+    return jobs
+
+
+def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, sf: SetFile,
+                 *, clearance: float | None, rate: float, timing: str = "shot",
+                 ) -> tuple[Problem, Shot]:
+    """One shot as the search takes it (read as convert reads it), and the shot read."""
+    from camtraj.collision import read_obstacles
+    from camtraj.convert import load_shot
+
+    shot = load_shot(shot_path, options)
+    obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
+    base_z = sf.floor_height * shot.meters_per_unit
+    problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),
+                      np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
+                      obstacles=tuple(obstacles),
+                      clearance=sf.clearance_m if clearance is None else clearance,
+                      name=one_line(shot_path), timing=timing)
+    return problem, shot
+
+
+def with_clearance(sf: SetFile, clearance: float | None) -> SetFile:
+    """The set file as the placed one is written: a --clearance given replaces its own."""
+    if clearance is None:
+        return sf
+    raw = dict(sf.raw)
+    raw["collision"] = {**raw.get("collision", {}), "clearance_m": clearance}
+    return replace(sf, raw=raw)
 
 
 def place(
@@ -436,40 +658,28 @@ def place(
         InputError: Unreadable shot, robot or set file, bad jobs.
         PlacementError: No placement passes the cheap tests (exit 3).
     """
-    from camtraj.collision import read_obstacles
-    from camtraj.convert import load_shot
     from camtraj.inputs import require_regular_files
     from camtraj.options import ConvertOptions
 
     start = time.perf_counter()
-    if jobs is None:
-        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
-    if jobs < 1:
-        msg = f"jobs must be at least 1, got {jobs}"
-        raise InputError(msg)
+    jobs = default_jobs(jobs)
     # the options convert would take: the same checks of the clearance and of every input file
     options = ConvertOptions(robot=robot, set_file=set_file, camera=camera, frames=frames,
                              clearance=clearance)
     require_regular_files(shot_path, options)
     rob = Robot.default() if robot is None else Robot.from_toml(robot)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
-    shot = load_shot(shot_path, options)
-    obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
-    base_z = sf.floor_height * shot.meters_per_unit
-    problem = Problem(rob, np.array(shot.cam2world), np.array(shot.times),
-                      np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
-                      obstacles=tuple(obstacles),
-                      clearance=sf.clearance_m if clearance is None else clearance)
-    results, evaluated, screened, region = search(
-        problem, sf, meters_per_unit=shot.meters_per_unit, up_axis=shot.up_axis, jobs=jobs,
-        progress=progress, top=top)
-    if clearance is not None:
-        raw = dict(sf.raw)
-        raw["collision"] = {**raw.get("collision", {}), "clearance_m": clearance}
-        sf = replace(sf, raw=raw)
-    return PlaceReport(str(shot_path), base_z, results, evaluated, screened,
-                       time.perf_counter() - start, sf, region)
+    problem, shot = load_problem(shot_path, options, rob, sf, clearance=clearance, rate=rate)
+    runner = _Runner((problem,), jobs, progress)
+    try:
+        layouts, screened, region = search(runner, (0,), sf,
+                                           meters_per_unit=shot.meters_per_unit,
+                                           up_axis=shot.up_axis, top=top)
+    finally:
+        runner.close()
+    return PlaceReport(str(shot_path), problem.base_z, [lay.results[0] for lay in layouts],
+                       runner.count, screened, time.perf_counter() - start,
+                       with_clearance(sf, clearance), region)
 
 
 def table(report: PlaceReport) -> str:
@@ -481,18 +691,21 @@ def table(report: PlaceReport) -> str:
              "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
              "stretch: margins)"]
     for i, r in enumerate(report.results, 1):
-        m = r.margins
-        speed = f"{math.floor(100 * min(r.max_speed, 99.99)):4d}%" if r.max_speed > 0 else "   -"
-        obst = m.get("obstacle_m")
-        ob = "       -" if obst is None else ("   clear" if not math.isfinite(obst)
-                                              else f"{obst:6.2f} m")
-        lines.append(
-            f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.1f}  {speed:>5}  {r.binding:<20}"
-            f"  {100 * m.get('limits_use', 1.0):5.0f}%  {m.get('wrist_deg', 0.0):4.0f}°"
-            f"  {m.get('stretch_deg', 0.0):6.0f}°  {ob}")
+        lines.append(f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.1f}  {columns(r)}")
         if not r.ok:
             lines.append(f"     not possible: {r.reason}")
     return "\n".join(lines)
+
+
+def columns(r: Result) -> str:
+    """A result's speed, binding axis, limits use, margins and obstacle distance columns."""
+    m = r.margins
+    speed = f"{math.floor(100 * min(r.max_speed, 99.99)):4d}%" if r.max_speed > 0 else "   -"
+    obst = m.get("obstacle_m")
+    ob = "       -" if obst is None else ("   clear" if not math.isfinite(obst)
+                                          else f"{obst:6.2f} m")
+    return (f"{speed:>5}  {r.binding:<20}  {100 * m.get('limits_use', 1.0):5.0f}%  "
+            f"{m.get('wrist_deg', 0.0):4.0f}°  {m.get('stretch_deg', 0.0):6.0f}°  {ob}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -500,53 +713,93 @@ def table(report: PlaceReport) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
-@click.command("place", epilog="Exit codes: 0 a placement can do the shot; 2 bad input; "
-               "3 no placement can (the reason is printed).")
-@click.argument("shot", type=click.Path(dir_okay=False))
+@click.command("place", epilog="Exit codes: 0 a placement can do the shot (every shot of a "
+               "scene); 2 bad input; 3 no placement can (the reason is printed; for a scene, "
+               "the smallest split of its shots into layouts).")
+@click.argument("shots", nargs=-1, type=click.Path(dir_okay=False), metavar="[SHOT]...")
+@click.option("--scene", type=click.Path(dir_okay=False), metavar="SCENE.toml",
+              help="A scene file listing the shots and each one's camera, frames and timing "
+                   "(instead of SHOT...).")
 @click.option("--robot", type=click.Path(exists=True, dir_okay=False), metavar="ROBOT.toml",
               help="Robot description file (default: the built-in robot).")
 @click.option("--set-file", type=click.Path(exists=True, dir_okay=False), metavar="SET.toml",
               help="Floor height and region, keep-out polygons, yaw range, obstacles.")
-@click.option("--camera", metavar="PRIM", help="Camera prim path (default: the only camera).")
-@click.option("--frames", metavar="A:B", help="Film frame range (inclusive).")
+@click.option("--camera", metavar="PRIM",
+              help="Camera prim path of every shot (default: the only camera).")
+@click.option("--frames", metavar="A:B", help="Film frame range of every shot (inclusive).")
 @click.option("--clearance", type=click.FloatRange(0.0, 5.0), metavar="M",
               help="Distance [m] to keep from the obstacles (default: the set file's).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes (default: the number of CPUs).")
 @click.option("--top", type=click.IntRange(1, 20), default=3, show_default=True,
-              help="Placements to list.")
+              help="Placements to list (one shot; a scene lists its best).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="PLACED.toml",
-              help="Write the best placement as a set file for convert --set-file.")
+              help="Write the best placement as a set file for convert --set-file (for a "
+                   "scene, named by its layout: the scene's name or PLACED's).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @click.pass_context
-def place_command(ctx: click.Context, /, shot: str, robot: str | None, set_file: str | None,
-                  camera: str | None, frames: str | None, clearance: float | None,
-                  jobs: int | None, top: int, as_json: bool, output: str | None,
-                  quiet: bool) -> None:
+def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | None,
+                  robot: str | None, set_file: str | None, camera: str | None,
+                  frames: str | None, clearance: float | None, jobs: int | None, top: int,
+                  as_json: bool, output: str | None, quiet: bool) -> None:
     """Find where to lay the track for SHOT: the robot base's x, y and yaw on the floor.
 
     Prints the best placements (x, y, yaw, maximum feasible speed, the axis that limits it,
     margins) and with -o writes the best as a set file that convert --set-file takes.
+
+    With several shots (or --scene), one layout for all of them: every shot reachable, then
+    the largest speed of the slowest shot; per shot its speed, margins and obstacle clearance,
+    and which shot limits the layout. Where no single layout serves every shot, the smallest
+    split (which shots share a layout) is printed and the exit code is 3.
     """
     import json
 
     from camtraj.errors import CamtrajError
-    from camtraj.inputs import run_inputs
+    from camtraj.inputs import files_read
     from camtraj.options import ConvertOptions, _parse_frames
     from camtraj.outputs import OutputSet
     from camtraj.set_file import to_toml
 
+    if (scene is None) == (not shots):
+        raise click.UsageError("give the shots or --scene SCENE.toml (one of them)")
+    progress = not quiet and sys.stderr.isatty()
     with OutputSet() as outputs:
         try:
+            span = _parse_frames(frames) if frames else None
+            layout_name = None
+            if scene is not None or len(shots) > 1:
+                from camtraj.scene import Scene, SceneShot
+
+                if scene is not None:
+                    if camera is not None or frames is not None:
+                        raise click.UsageError("with --scene, give --camera and --frames per "
+                                               "shot in the scene file")
+                    parsed = Scene.read(scene)
+                    if parsed.set_file is not None and set_file is not None:
+                        raise click.UsageError("the scene file names a set file; give "
+                                               "--set-file only without one")
+                    set_file = set_file or parsed.set_file
+                    members = list(parsed.shots)
+                    layout_name = parsed.name or Path(scene).stem
+                else:
+                    members = [SceneShot(s, camera, span) for s in shots]
+                    layout_name = Path(output).stem if output is not None else "scene"
             if output is not None:  # checked before the search, like every command's outputs
                 outputs.add(output, "-o")
-                outputs.refuse_inputs(run_inputs(shot, ConvertOptions(robot=robot,
-                                                                      set_file=set_file)))
-            report = place(shot, robot=robot, set_file=set_file, camera=camera,
-                           frames=_parse_frames(frames) if frames else None,
-                           clearance=clearance, jobs=jobs,
-                           progress=not quiet and sys.stderr.isatty(), top=top)
+                given = [m.path for m in members] if layout_name is not None else list(shots)
+                outputs.refuse_inputs([
+                    *files_read(given, ConvertOptions(robot=robot, set_file=set_file)),
+                    *([] if scene is None else [(Path(scene), "the scene file")])])
+            if layout_name is None:
+                report = place(shots[0], robot=robot, set_file=set_file, camera=camera,
+                               frames=span, clearance=clearance, jobs=jobs,
+                               progress=progress, top=top)
+            else:
+                _place_scene(ctx, outputs, members, layout_name, robot=robot,
+                             set_file=set_file, clearance=clearance, jobs=jobs,
+                             progress=progress, as_json=as_json, output=output)
+                return
         except CamtrajError as exc:
             click.echo(f"ERROR: {exc}", err=True)
             ctx.exit(exc.exit_code)
@@ -558,11 +811,40 @@ def place_command(ctx: click.Context, /, shot: str, robot: str | None, set_file:
             ctx.exit(3)
         if output is not None:
             text = to_toml(best.base2world(report.base_z), report.set_file.raw)
-            try:
-                outputs.write_bytes(output, text.encode("utf-8"))
-                outputs.commit()
-            except CamtrajError as exc:
-                click.echo(f"ERROR: {exc}", err=True)
-                ctx.exit(exc.exit_code)
-            if not as_json:
-                click.echo(f"  wrote {output}")
+            _write(ctx, outputs, output, text, as_json)
+
+
+def _write(ctx: click.Context, outputs: Any, output: str, text: str, as_json: bool) -> None:
+    from camtraj.errors import CamtrajError
+
+    try:
+        outputs.write_bytes(output, text.encode("utf-8"))
+        outputs.commit()
+    except CamtrajError as exc:
+        click.echo(f"ERROR: {exc}", err=True)
+        ctx.exit(exc.exit_code)
+    if not as_json:
+        click.echo(f"  wrote {output}")
+
+
+def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str, *,
+                 robot: str | None, set_file: str | None, clearance: float | None,
+                 jobs: int | None, progress: bool, as_json: bool, output: str | None) -> None:
+    """``camtraj place`` of a scene: one layout for every shot, or the smallest split."""
+    import json
+
+    from camtraj.scene import place_scene, split_text
+    from camtraj.scene import table as scene_table
+    from camtraj.set_file import to_toml
+
+    report = place_scene(members, name=name, robot=robot, set_file=set_file,
+                         clearance=clearance, jobs=jobs, progress=progress)
+    click.echo(json.dumps(report.to_json(), indent=2) if as_json else scene_table(report))
+    if not report.ok or report.layout is None:
+        click.echo(f"ERROR: no single layout serves every shot of the scene; the smallest "
+                   f"split: {split_text(report)} (place each group on its own)", err=True)
+        ctx.exit(3)
+    if output is not None:
+        text = to_toml(report.layout.base2world(report.base_z), report.set_file.raw,
+                       layout=name)
+        _write(ctx, outputs, output, text, as_json)

@@ -9,6 +9,7 @@ every test is only necessary (a candidate that passes may still fail the full so
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,9 +80,13 @@ def reach_envelope(robot: Robot, dz: float = 0.05) -> Envelope:
 
 
 def reach_slack(env: Envelope, points: Array, x: Array, y: Array, yaw_deg: Array,
-                base_z: float) -> Array:
+                base_z: float, sizes: Sequence[int] | None = None) -> Array:
     """(N,) how far every point (k, 3) stays inside the reach from each candidate [m]
-    (negative: some point is out of reach)."""
+    (negative: some point is out of reach).
+
+    With ``sizes`` (the points are consecutive groups of these sizes, one per shot of a
+    scene, summing to k), (N, S): each shot's slack, all shots' points tested at once.
+    """
     a = np.radians(yaw_deg)[:, None]
     dx, dy = points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None]
     s = np.cos(a) * dx + np.sin(a) * dy  # along the track
@@ -92,8 +97,12 @@ def reach_slack(env: Envelope, points: Array, x: Array, y: Array, yaw_deg: Array
     far = np.hypot(np.maximum(np.abs(s - env.axis_lo), np.abs(s - env.axis_hi)), lat)
     slack = np.minimum(rmax + env.offset - near, far - (rmin - env.offset))
     slack = np.where(np.isfinite(slack), slack, -np.inf)
-    out: Array = slack.min(axis=1)
-    return out
+    if sizes is None:
+        out: Array = slack.min(axis=1)
+        return out
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    per_shot: Array = np.minimum.reduceat(slack, starts, axis=1)
+    return per_shot
 
 
 def rail_footprints(robot: Robot, x: Array, y: Array, yaw_deg: Array) -> Array:

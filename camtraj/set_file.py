@@ -8,6 +8,7 @@ One format for what people write by hand and what ``camtraj place -o`` writes; `
     y = -3.0
     z = 0.0
     yaw_deg = 30.0         # or rotation = [[...], [...], [...]] (3x3), not both
+    layout = "scene 12"    # the layout's name (written by a scene's `camtraj place`)
 
     [floor]                # stage units and stage axes (as the USD stage is authored)
     height = 0.0           # the floor's up coordinate; `place` stands the base on it
@@ -44,7 +45,7 @@ from camtraj.inputs import one_line, read_text
 Array = NDArray[np.float64]
 
 _KEYS: dict[str, set[str]] = {
-    "placement": {"x", "y", "z", "yaw_deg", "rotation"},
+    "placement": {"x", "y", "z", "yaw_deg", "rotation", "layout"},
     "floor": {"height", "region", "keep_out"},
     "search": {"yaw_deg", "yaw_range_deg"},
     "collision": {"prims", "clearance_m"},
@@ -65,6 +66,7 @@ class SetFile:
         yaw_range_deg: Allowed yaw of the track (lo, hi) [deg]; lo == hi for a fixed yaw.
         prims: Prim paths or glob patterns of obstacles on the shot's stage.
         clearance_m: Required distance between the robot and the obstacles [m].
+        layout: The name of the layout the placement was found for (a scene's), or None.
     """
 
     source: str = "<none>"
@@ -75,6 +77,7 @@ class SetFile:
     yaw_range_deg: tuple[float, float] | None = None
     prims: tuple[str, ...] = ()
     clearance_m: float = 0.0
+    layout: str | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -139,6 +142,7 @@ class SetFile:
             yaw_range_deg=yaw_range,
             prims=tuple(prims),
             clearance_m=clearance,
+            layout=_layout(tables["placement"], where),
             raw=data,
         )
 
@@ -184,10 +188,11 @@ def floor_polygon(points: Array, meters_per_unit: float, up_axis: str, source: s
     return xy
 
 
-def to_toml(base2world: Array, raw: dict[str, Any]) -> str:
+def to_toml(base2world: Array, raw: dict[str, Any], layout: str | None = None) -> str:
     """A set file: ``raw``'s tables as they were, with ``[placement]`` replaced by ``base2world``.
 
-    The placement is written as x, y, z and yaw_deg (``base2world`` must be a yaw about up).
+    The placement is written as x, y, z and yaw_deg (``base2world`` must be a yaw about up),
+    and the layout's name when given.
     """
     R, t = base2world[:3, :3], base2world[:3, 3]
     yaw = math.degrees(math.atan2(R[1, 0], R[0, 0]))
@@ -195,6 +200,8 @@ def to_toml(base2world: Array, raw: dict[str, Any]) -> str:
              "[placement]  # robot base in the converted world: metres, Z-up",
              f"x = {float(t[0])!r}", f"y = {float(t[1])!r}", f"z = {float(t[2])!r}",
              f"yaw_deg = {yaw!r}"]
+    if layout is not None:
+        lines.append(f"layout = {_toml_value(layout)}")
     for name in ("floor", "search", "collision"):
         table = raw.get(name)
         if not table:
@@ -256,6 +263,21 @@ def _polygon(value: Any, where: str, key: str) -> Array:
                "[x, y, z] finite numbers in stage units")
         raise InputError(msg)
     return np.array(value, dtype=float)
+
+
+MAX_LAYOUT_CHARS = 200
+
+
+def _layout(table: dict[str, Any], where: str) -> str | None:
+    value = table.get("layout")
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value.isprintable() or not 0 < len(value) \
+            <= MAX_LAYOUT_CHARS:
+        msg = (f"{where}: [placement] layout must be a name of 1 to {MAX_LAYOUT_CHARS} "
+               "printable characters")
+        raise InputError(msg)
+    return value
 
 
 def _placement(table: dict[str, Any], where: str) -> Array:

@@ -238,6 +238,27 @@ def _corpus(base: Path, good_mcap: Path) -> tuple[dict[str, Case], Path]:
         ["place", SHOTS / "unreachable.usda", "-o", "/proc/placed.toml"], "/proc")
     add("place_o_folder_is_a_file_checked_before_the_search",
         ["place", SHOTS / "unreachable.usda", "-o", robot / "placed.toml"], "not a folder")
+    # a scene (several shots, or a scene file): -o is none of any shot's inputs
+    (d / "scene.toml").write_text('set_file = "set.toml"\n[[shot]]\npath = "maya.usda"\n'
+                                  '[[shot]]\npath = "s/a.usda"\n', encoding="utf-8")
+    second = d / "s" / "a.usda"
+    add("place_scene_o_is_the_second_shot", ["place", good, second, "-o", second],
+        "the shot a.usda")
+    add("place_scene_o_is_a_layer_of_the_second_shot", ["place", second, layered, "-o", good],
+        "layer used by the shot layered.usda")
+    add("place_scene_o_is_the_scene_file",
+        ["place", "--scene", d / "scene.toml", "-o", d / "scene.toml"], "the scene file")
+    add("place_scene_o_is_the_set_file_it_names",
+        ["place", "--scene", d / "scene.toml", "-o", set_file], "the set file")
+    add("place_scene_o_is_a_shot_it_names",
+        ["place", "--scene", d / "scene.toml", "-o", second], "the shot a.usda")
+    add("place_scene_a_fifo_as_a_shot", ["place", good, d / "pipe.usda"], "named pipe")
+    add("place_scene_a_fifo_as_a_shot_with_o", ["place", good, d / "pipe.usda", "-o", "p.toml"],
+        "named pipe")
+    add("place_scene_file_fifo", ["place", "--scene", d / "pipe.toml"], "named pipe")
+    add("place_scene_shots_of_different_units",
+        ["place", good, SHOTS / "blender_crane_up.usda"], "units")
+    add("place_scene_and_shots", ["place", good, "--scene", d / "scene.toml"], "scene")
     add("farm_openjd_rig_layer_is_another_shot",
         ["farm", "export", "--format", "openjd", "--usd", d / "s" / "a.usda",
          d / "s" / "a.rig.usda", "--outdir", d / "s", "-o", "job.yaml"], "a.rig.usda", "shot")

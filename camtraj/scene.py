@@ -1,0 +1,419 @@
+"""A scene: shots shot from one track layout, and the one placement that serves them all.
+
+``camtraj place SHOT1 SHOT2 …`` or ``camtraj place --scene SCENE.toml`` searches one placement
+for every shot (:func:`camtraj.place.search` over all of them): every shot reachable, then the
+largest worst-shot maximum feasible speed, the margins as the tie-break. Where no single
+placement serves every shot, the smallest split is proposed: the fewest groups of shots that
+each share a placement (searched group by group, the cheap tests ruling out most groups).
+
+The scene file (TOML; paths relative to it)::
+
+    name = "sc12"              # the layout's name, written into the placed set file
+    set_file = "set.toml"      # optional (or --set-file)
+
+    [[shot]]
+    path = "sh010.usda"
+    camera = "/World/cam"      # optional: the only camera
+    frames = [1, 48]           # optional: the stage's range
+    timing = "shot"            # optional: "shot" (must run at its own timing), "scale" or
+                               # "optimal" (may be slowed down: only reach and collisions count)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from camtraj.errors import InputError, PlacementError
+from camtraj.inputs import one_line, read_text, require_regular_files
+from camtraj.options import TIMING_MODES, ConvertOptions
+from camtraj.place import (
+    Layout,
+    Problem,
+    _Runner,
+    columns,
+    default_jobs,
+    load_problem,
+    screen,
+    search,
+    with_clearance,
+)
+from camtraj.robot import Robot
+from camtraj.set_file import SetFile
+
+_SCENE_KEYS = {"name", "set_file", "shot"}
+_SHOT_KEYS = {"path", "camera", "frames", "timing"}
+MAX_SPLIT_SHOTS = 12
+"""Scenes of more shots get no split proposal (the partitions grow too many to try)."""
+
+
+@dataclass(frozen=True)
+class SceneShot:
+    """One shot of a scene and its own options."""
+
+    path: str
+    camera: str | None = None
+    frames: tuple[int, int] | None = None
+    timing: str = "shot"
+
+    @property
+    def name(self) -> str:
+        return one_line(self.path)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A parsed scene file (see the module docstring)."""
+
+    source: str
+    shots: tuple[SceneShot, ...]
+    name: str | None = None
+    set_file: str | None = None
+
+    @classmethod
+    def read(cls, path: str | os.PathLike[str]) -> Scene:
+        """Read and check a scene file; shot and set file paths are made relative to it.
+
+        Raises:
+            InputError: Unreadable, not TOML, unknown keys, malformed values (one line naming
+                the file and the key).
+        """
+        where = f"scene file {one_line(path)}"
+        text = read_text(path, "scene file", InputError)
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            msg = f"{where}: not valid TOML ({exc})"
+            raise InputError(msg) from exc
+        _allowed(data, _SCENE_KEYS, where, "the top level")
+        base = Path(os.fsdecode(path)).parent
+        name = data.get("name")
+        if name is not None and not (isinstance(name, str) and name.isprintable()
+                                     and 0 < len(name) <= 200):
+            msg = f"{where}: name must be 1 to 200 printable characters"
+            raise InputError(msg)
+        set_file = data.get("set_file")
+        if set_file is not None and not (isinstance(set_file, str) and set_file):
+            msg = f"{where}: set_file must be a file name"
+            raise InputError(msg)
+        shots = data.get("shot")
+        if not isinstance(shots, list) or not shots or not all(isinstance(s, dict)
+                                                                for s in shots):
+            msg = f'{where}: list the shots as [[shot]] tables, each with a path = "…"'
+            raise InputError(msg)
+        parsed = tuple(_shot(s, base, f"{where}: [[shot]] {k + 1}") for k, s in enumerate(shots))
+        return cls(one_line(path), parsed, name,
+                   None if set_file is None else str(base / set_file))
+
+
+def _allowed(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        msg = (f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
+               f"allowed: {', '.join(sorted(allowed))}")
+        raise InputError(msg)
+
+
+def _shot(table: dict[str, Any], base: Path, where: str) -> SceneShot:
+    _allowed(table, _SHOT_KEYS, where, "the shot")
+    path = table.get("path")
+    if not isinstance(path, str) or not path:
+        msg = f'{where}: path = "SHOT.usda" is required'
+        raise InputError(msg)
+    camera = table.get("camera")
+    if camera is not None and not (isinstance(camera, str) and camera.startswith("/")):
+        msg = f"{where}: camera must be a prim path such as /World/cam"
+        raise InputError(msg)
+    frames = table.get("frames")
+    if frames is not None:
+        ok = (isinstance(frames, list) and len(frames) == 2
+              and all(isinstance(f, int) and not isinstance(f, bool) for f in frames)
+              and frames[0] <= frames[1])
+        if not ok:
+            msg = f"{where}: frames must be [first, last], two whole numbers, first <= last"
+            raise InputError(msg)
+        frames = (frames[0], frames[1])
+    timing = table.get("timing", "shot")
+    if timing not in TIMING_MODES:
+        msg = f"{where}: timing must be one of {', '.join(TIMING_MODES)}, got {timing!r}"
+        raise InputError(msg)
+    return SceneShot(str(base / path), camera, frames, timing)
+
+
+# ---------------------------------------------------------------------------------------------
+# The search and the split
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class SceneReport:
+    """What the scene's placement search found.
+
+    ``layout`` is the best single placement for every shot (None when the cheap tests rule
+    every one out: ``reason`` says why); ``split`` the smallest split when it does not serve
+    every shot: groups of shot indices, each with its placement.
+    """
+
+    name: str
+    shots: tuple[SceneShot, ...]
+    base_z: float
+    layout: Layout | None
+    reason: str
+    split: list[tuple[tuple[int, ...], Layout]] | None
+    evaluated: int
+    screened: int
+    seconds: float
+    set_file: SetFile
+    region: dict[str, Any]
+
+    @property
+    def ok(self) -> bool:
+        return self.layout is not None and self.layout.ok
+
+    def to_json(self) -> dict[str, Any]:
+        return {"layout": self.name, "status": "ok" if self.ok else "split",
+                "shots": [s.path for s in self.shots], "base_z": self.base_z,
+                "placement": None if self.layout is None else self._layout_json(self.layout),
+                "reason": self.reason,
+                "split": None if self.split is None else [
+                    {"shots": [self.shots[i].path for i in group],
+                     "placement": self._layout_json(lay)} for group, lay in self.split],
+                "evaluated": self.evaluated, "screened": self.screened,
+                "seconds": self.seconds, "region": self.region}
+
+    def _layout_json(self, lay: Layout) -> dict[str, Any]:
+        return {"x": lay.x, "y": lay.y, "yaw_deg": lay.yaw_deg, "ok": lay.ok,
+                "limiting_shot": self.shots[lay.limiting].path if lay.results else None,
+                "shots": [{"shot": self.shots[i].path, **lay.results[i].to_json()}
+                          for i in sorted(lay.results)]}
+
+
+def place_scene(
+    shots: Sequence[SceneShot],
+    *,
+    name: str,
+    robot: str | None = None,
+    set_file: str | None = None,
+    clearance: float | None = None,
+    rate: float = 250.0,
+    jobs: int | None = None,
+    progress: bool = False,
+) -> SceneReport:
+    """One placement for every shot of a scene, or the smallest split (module docstring).
+
+    Raises:
+        InputError: Unreadable shot, robot or set file; shots on stages of different units.
+        PlacementError: A shot that no placement can do even on its own (exit 3).
+    """
+    start = time.perf_counter()
+    jobs = default_jobs(jobs)
+    options = [ConvertOptions(robot=robot, set_file=set_file, camera=s.camera, frames=s.frames,
+                              clearance=clearance, timing=s.timing) for s in shots]
+    for s, opt in zip(shots, options, strict=True):
+        require_regular_files(s.path, opt)
+    rob = Robot.default() if robot is None else Robot.from_toml(robot)
+    sf = SetFile.read(set_file) if set_file is not None else SetFile()
+    problems: list[Problem] = []
+    units: list[tuple[float, str]] = []
+    for s, opt in zip(shots, options, strict=True):
+        problem, shot = load_problem(s.path, opt, rob, sf, clearance=clearance, rate=rate,
+                                     timing=s.timing)
+        problems.append(problem)
+        units.append((shot.meters_per_unit, shot.up_axis))
+    if len(set(units)) > 1:
+        seen = ", ".join(f"{s.name} {u[0]:g} m per unit {u[1]}-up"
+                         for s, u in zip(shots, units, strict=True))
+        msg = f"the shots of a scene must share the stage's units and up axis ({seen})"
+        raise InputError(msg)
+    mpu, up = units[0]
+    everyone = tuple(range(len(shots)))
+    runner = _Runner(tuple(problems), jobs, progress)
+    try:
+        def group_search(group: tuple[int, ...]) -> tuple[list[Layout], int, dict[str, Any]]:
+            return search(runner, group, sf, meters_per_unit=mpu, up_axis=up, top=1)
+
+        layout: Layout | None = None
+        reason, screened = "", 0
+        region: dict[str, Any] = {}
+        try:
+            layouts, screened, region = group_search(everyone)
+            layout = layouts[0]
+            if not layout.ok:
+                bad = layout.results[layout.limiting]
+                reason = f"{shots[layout.limiting].name} at the best: {bad.reason}"
+        except PlacementError as exc:
+            reason = str(exc)
+        split = None
+        if layout is None or not layout.ok:
+            def cheap(group: tuple[int, ...]) -> bool:
+                try:
+                    return bool(screen(runner.problems, group, sf, meters_per_unit=mpu,
+                                       up_axis=up).ok.any())
+                except PlacementError:
+                    return False
+
+            split = smallest_split(len(shots), cheap, lambda g: _best_ok(group_search, g),
+                                   known={everyone: None})
+            if split is None:
+                msg = _no_split(shots, group_search, cheap)
+                raise PlacementError(msg)
+    finally:
+        runner.close()
+    return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,
+                       runner.count, screened, time.perf_counter() - start,
+                       with_clearance(sf, clearance), region)
+
+
+def _best_ok(group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]],
+             group: tuple[int, ...]) -> Layout | None:
+    try:
+        best = group_search(group)[0][0]
+    except PlacementError:
+        return None
+    return best if best.ok else None
+
+
+def _no_split(shots: Sequence[SceneShot],
+              group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]],
+              cheap: Callable[[tuple[int, ...]], bool]) -> str:
+    """Why no split works: the first shot that no placement can do on its own."""
+    for i, s in enumerate(shots):
+        try:
+            best = group_search((i,))[0][0]
+        except PlacementError as exc:
+            return f"{s.name}: no placement can do it on its own: {exc}"
+        if not best.ok:
+            return f"{s.name}: no placement can do it on its own; the best: " \
+                   f"{best.results[i].reason}"
+    if len(shots) > MAX_SPLIT_SHOTS:
+        return (f"no single layout serves every shot, and a scene of more than "
+                f"{MAX_SPLIT_SHOTS} shots gets no split proposal: place it in smaller groups")
+    return "no split of the scene found"  # pragma: no cover - singletons always split
+
+
+def partitions(items: Sequence[int], k: int) -> Iterator[list[tuple[int, ...]]]:
+    """Every partition of ``items`` into ``k`` non-empty groups (each group in item order)."""
+    n = len(items)
+    if k == 1:
+        yield [tuple(items)]
+        return
+    if n == k:
+        yield [(i,) for i in items]
+        return
+    if k < 1 or n < k:
+        return
+    first, rest = items[0], items[1:]
+    for p in partitions(rest, k - 1):
+        yield [(first,), *p]
+    for p in partitions(rest, k):
+        for j in range(len(p)):
+            yield [*p[:j], (first, *p[j]), *p[j + 1:]]
+
+
+def smallest_split(n: int, cheap: Callable[[tuple[int, ...]], bool],
+                   serve: Callable[[tuple[int, ...]], Layout | None], *,
+                   known: dict[tuple[int, ...], Layout | None] | None = None,
+                   ) -> list[tuple[tuple[int, ...], Layout]] | None:
+    """The split of shots 0..n-1 into the fewest groups that each share a placement.
+
+    ``cheap(group)`` is a necessary test (some placement passes the cheap tests for every
+    shot of the group); ``serve(group)`` the search, a placement that serves the group or None.
+    A group that fails either rules out every group that holds it. Partitions are tried by
+    the number of groups, two first; the first whose every group is served is returned.
+    """
+    if n > MAX_SPLIT_SHOTS:
+        return None
+    served: dict[tuple[int, ...], Layout | None] = dict(known or {})
+    passes: dict[tuple[int, ...], bool] = {}
+    failed: list[frozenset[int]] = [frozenset(g) for g, lay in served.items() if lay is None]
+
+    def could(group: tuple[int, ...]) -> bool:
+        if any(f <= frozenset(group) for f in failed):
+            return False
+        if group not in passes:
+            passes[group] = cheap(group)
+            if not passes[group]:
+                failed.append(frozenset(group))
+        return passes[group]
+
+    def works(group: tuple[int, ...]) -> Layout | None:
+        if not could(group):
+            return None
+        if group not in served:
+            served[group] = serve(group)
+            if served[group] is None:
+                failed.append(frozenset(group))
+        return served[group]
+
+    for k in range(2, n + 1):
+        for partition in partitions(list(range(n)), k):
+            if not all(could(g) for g in partition):
+                continue
+            found = [works(g) for g in partition]
+            if all(lay is not None for lay in found):
+                return [(g, lay) for g, lay in zip(partition, found, strict=True)
+                        if lay is not None]
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# For people
+# ---------------------------------------------------------------------------------------------
+
+HEADER = ("  shot                      speed  binding           limits use  wrist  stretch"
+          "  obstacle")
+
+
+def _rows(report: SceneReport, lay: Layout) -> list[str]:
+    lines = [f"  x {lay.x:.3f} m  y {lay.y:.3f} m  yaw {lay.yaw_deg:.1f} deg", HEADER]
+    for i in sorted(lay.results):
+        r = lay.results[i]
+        name = report.shots[i].name
+        short = name if len(name) <= 24 else "…" + name[-23:]
+        lines.append(f"  {short:<24}  {columns(r)}"
+                     + ("  <- limits the layout" if i == lay.limiting and len(lay.order) > 1
+                        else ""))
+        if not r.ok:
+            lines.append(f"     not possible: {r.reason}")
+    return lines
+
+
+def table(report: SceneReport) -> str:
+    """The scene's placement per shot, or the split, for people."""
+    n = len(report.shots)
+    lines = [f"layout {report.name}: {n} shots, {report.evaluated} shot placements solved, "
+             f"{report.screened} screened, in {report.seconds:.1f} s (floor z "
+             f"{report.base_z:.3f} m)",
+             "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
+             "stretch: margins; obstacle: closest approach)"]
+    if report.ok and report.layout is not None:
+        lay = report.layout
+        lines += _rows(report, lay)
+        lines.append(f"  {report.shots[lay.limiting].name} limits the layout: "
+                     f"{_speed(lay.results[lay.limiting].max_speed)} of real time")
+        return "\n".join(lines)
+    lines.append(f"  no single layout serves every shot: {report.reason}")
+    if report.split is not None:
+        lines.append(f"  the smallest split: {len(report.split)} layouts")
+        for k, (group, lay) in enumerate(report.split, 1):
+            names = ", ".join(report.shots[i].name for i in group)
+            lines.append(f"  layout {k}: {names}")
+            lines += ["  " + ln for ln in _rows(report, lay)]
+    return "\n".join(lines)
+
+
+def split_text(report: SceneReport) -> str:
+    """The split in one line: ``a.usda, c.usda | b.usda``."""
+    assert report.split is not None
+    return " | ".join(", ".join(report.shots[i].name for i in group)
+                      for group, _ in report.split)
+
+
+def _speed(speed: float) -> str:
+    return f"{math.floor(100 * min(speed, 99.99))}%" if speed > 0 else "0%"
