@@ -228,6 +228,38 @@ def in_motion(seed: int) -> tuple[Array, Array]:
     return t, q
 
 
+SAMPLES = Path(__file__).resolve().parent.parent / "samples" / "shots"
+
+
+@pytest.mark.parametrize("sample", ["maya_dolly_push_in", "blender_crane_up",
+                                    "orbit_animated_parent", "whip_pan"])
+def test_every_sample_take_runs_up_and_out_gently(robot: Robot, sample: str) -> None:
+    """Issue 15: in every shipped sample's take (shot timing, or scale where the shot cannot
+    run at its own), the run-up and run-out use no more of any axis's acceleration and jerk
+    limits than the shot itself, or a quarter of them, measured on the written samples."""
+    from camtraj.convert import analyse
+    from camtraj.options import ConvertOptions
+
+    limits = Limits.from_robot(robot)
+    shot = SAMPLES / f"{sample}.usda"
+    try:
+        take = analyse(shot, ConvertOptions()).take
+    except TimingLimitError:
+        take = analyse(shot, ConvertOptions(timing="scale")).take
+    assert take is not None
+    assert_take_inside(take, limits)
+    a, b = take.frame_samples[0], take.frame_samples[-1]
+    for part, report in ((slice(0, a + 1), take.report.runup),
+                         (slice(b, None), take.report.runout)):
+        assert report["edges"] == "gentle"
+        for quantity, order, bound in (("acceleration", 2, limits.acceleration),
+                                       ("jerk", 3, limits.jerk)):
+            allowed = np.maximum([take.report.peak_use[n][quantity] for n in limits.names],
+                                 0.25)
+            est = np.abs(divided(take.t[part], take.q[part], order)).max(axis=0) / bound
+            assert np.all(est <= allowed * (1 + 1e-6) + 1e-9), (quantity, est, allowed)
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("start", [False, True])
 def test_gentle_edges_use_no_more_than_the_shot_or_a_quarter(
