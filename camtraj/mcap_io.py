@@ -394,8 +394,9 @@ def _encode_shot_frames(take: TakeData) -> list[bytes]:
     tpl = _Cdr()
     tpl.slot("frame", "<i4")
     tpl.slot("time", "<f8")
-    tpl.strings(take.joint_names)
-    tpl.slot_f64s("position", len(take.joint_names))
+    joints = take.joint_names[: len(take.joint_names) - len(take.lens_names)]
+    tpl.strings(joints)
+    tpl.slot_f64s("position", len(joints))
     tpl.slot("target", "<f8", 7)
     tpl.slot("achieved", "<f8", 7)
     tpl.slot("lens", "<f8", 3)
@@ -419,7 +420,9 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
     # the intrinsics, not the size.
     height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
                                IMAGE_WIDTH)[0]) if n else 1
-    K = camera_matrices(take.focal_length_mm, take.horizontal_aperture_mm,
+    focal = (take.focal_length_mm if take.camera_focal_length_mm is None
+             else take.camera_focal_length_mm)
+    K = camera_matrices(focal, take.horizontal_aperture_mm,
                         take.vertical_aperture_mm, IMAGE_WIDTH, height,
                         take.horizontal_aperture_offset_mm, take.vertical_aperture_offset_mm)
     P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
@@ -549,11 +552,12 @@ class TakeData:
     """Everything the writer needs, as plain arrays in SI units.
 
     Attributes:
-        joint_names: Joint names in design order, length 8.
+        joint_names: Axis names in design order: the 8 joints, then any lens axes
+            (``lens_names``).
         t: Servo sample times [s] from the start of the take, shape (m,), increasing, >= 0.
-        q: Joint positions [m, rad] per servo sample, shape (m, 8).
-        qd: Joint velocities [m/s, rad/s], shape (m, 8).
-        qdd: Joint accelerations [m/s², rad/s²], shape (m, 8).
+        q: Axis positions [m, rad] per servo sample, shape (m, axes).
+        qd: Axis velocities [m/s, rad/s], shape (m, axes).
+        qdd: Axis accelerations [m/s², rad/s²], shape (m, axes).
         frame_numbers: Film frame numbers (USD time codes), shape (n,), integers.
         frame_times: Take time of each film frame [s], shape (n,), non-decreasing.
         frame_q: The IK solution per frame [m, rad], shape (n, 8).
@@ -572,6 +576,11 @@ class TakeData:
         horizontal_aperture_offset_mm, vertical_aperture_offset_mm: Lens shift per frame
             [mm] (film back off the lens axis, +x right, +y up), shape (n,); None: zeros.
             CameraInfo's principal point (cx, cy) carries it.
+        lens_names: The lens motors (``zoom``, ``focus``, ``iris``) that end ``joint_names``
+            (lens ring angles [rad] in ``q``); ``/shot/frames`` and ``/tf`` take the joints
+            before them.
+        camera_focal_length_mm: The focal length the lens gives per frame [mm], shape (n,),
+            for CameraInfo; None: ``focal_length_mm``.
     """
 
     joint_names: tuple[str, ...]
@@ -593,11 +602,18 @@ class TakeData:
     base2world: Array = field(default_factory=lambda: np.eye(4))
     horizontal_aperture_offset_mm: Array | None = None
     vertical_aperture_offset_mm: Array | None = None
+    lens_names: tuple[str, ...] = ()
+    camera_focal_length_mm: Array | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
         object.__setattr__(self, "joint_names", names)
         j = len(names)
+        lens = tuple(str(n) for n in self.lens_names)
+        object.__setattr__(self, "lens_names", lens)
+        if lens and names[j - len(lens):] != lens:
+            msg = f"TakeData.joint_names {list(names)} must end with the lens axes {list(lens)}"
+            raise ValueError(msg)
         t = self._array("t", self.t, None)
         m = t.shape[0] if t.ndim == 1 else -1
         if t.ndim != 1 or m < 1:
@@ -622,11 +638,13 @@ class TakeData:
         if np.any(np.diff(ft) < 0) or (n and (ft[0] < 0 or ft[-1] > t[-1] + 1e-9)):
             msg = "TakeData.frame_times must be non-decreasing and inside the take"
             raise ValueError(msg)
-        self._array("frame_q", self.frame_q, (n, j))
+        self._array("frame_q", self.frame_q, (n, j - len(lens)))
         self._array("target", self.target, (n, 4, 4))
         self._array("achieved", self.achieved, (n, 4, 4))
         for name in ("focal_length_mm", "focus_distance_m", "f_stop"):
             self._array(name, getattr(self, name), (n,))
+        if self.camera_focal_length_mm is not None:
+            self._array("camera_focal_length_mm", self.camera_focal_length_mm, (n,))
         for name, fallback in (("horizontal_aperture_mm", _USD_APERTURE_MM[0]),
                                ("vertical_aperture_mm", _USD_APERTURE_MM[1])):
             value = getattr(self, name)
@@ -760,10 +778,11 @@ def write_take_to(
     stream: IO[bytes], take: TakeData, robot: Robot, metadata: Mapping[str, str]
 ) -> None:
     """Write a take as a ROS 2 MCAP file into an open binary stream (see :func:`write_take`)."""
-    if tuple(take.joint_names) != tuple(robot.joint_names):
+    lens = () if robot.lens is None else robot.lens.names
+    if tuple(take.joint_names) != (*robot.joint_names, *lens) or take.lens_names != lens:
         msg = (
             f"take joint names {list(take.joint_names)} differ from the robot's "
-            f"{list(robot.joint_names)}"
+            f"{list(robot.joint_names) + list(lens)}"
         )
         raise ValueError(msg)
     for key, value in metadata.items():
@@ -813,7 +832,9 @@ def _build_records(take: TakeData, robot: Robot) -> _Records:
 
     times = tf_times(take)
     tf_ns = seconds_to_ns(times)
-    moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd, times))
+    nj = len(names) - len(take.lens_names)  # the joints; lens motors move no link
+    moving = link_transforms(robot, interpolate_servo(take.t, take.q[:, :nj], take.qd[:, :nj],
+                                                      times))
     messages[TOPIC_TF] = list(
         zip(
             tf_ns.tolist(),
