@@ -117,17 +117,19 @@ class Calibration:
         return out
 
     def position(self, x: ArrayLike) -> Array:
-        """Motor positions [rad] of lens quantities ``x`` (inside the calibrated range)."""
-        lo, hi = self._u_range
-        out: Array = self._spline(np.clip(self.u(x), lo, hi))
+        """Motor positions [rad] of lens quantities ``x`` inside the calibrated range (a hair
+        beyond an end, :data:`RANGE_RTOL`, the end interval's cubic goes on)."""
+        out: Array = self._spline(self.u(x))
         return out
 
     def value(self, motor: ArrayLike) -> Array:
         """The lens quantity at motor positions [rad]: the inverse of :meth:`position`
-        (bisection; a position beyond the table's gives its end's quantity)."""
+        (bisection over the table's range and a hair beyond; a position farther out gives
+        that bracket's end)."""
         m = np.asarray(motor, dtype=np.float64)
         lo_u, hi_u = self._u_range
-        lo, hi = np.full(m.shape, lo_u), np.full(m.shape, hi_u)
+        margin = 1e-5 * (hi_u - lo_u)
+        lo, hi = np.full(m.shape, lo_u - margin), np.full(m.shape, hi_u + margin)
         rising = self._rising
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
@@ -305,7 +307,7 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
                    f"{_show(axis.name, cal.low, axis.unit)} to "
                    f"{_show(axis.name, cal.high, axis.unit)}; lens file {lens.source})")
             raise LensRangeError(msg)
-        out[:, i] = cal.position(np.clip(x, cal.low, cal.high))
+        out[:, i] = cal.position(x)
     return out
 
 
