@@ -11,14 +11,16 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
 from scipy.interpolate import PchipInterpolator
 
 from camtraj import Robot
-from camtraj.errors import LensFileError, RobotFileError
-from camtraj.lens import LENS_AXES, Lens
+from camtraj.errors import LensFileError, LensRangeError, RobotFileError
+from camtraj.lens import LENS_AXES, Lens, commanded_lens, lens_positions, lens_warnings
 from tests.test_convert import ROOT, SHOTS, error_line, run_cli
 
 LENSES = ROOT / "camtraj" / "data" / "lenses"
@@ -176,3 +178,51 @@ def test_bad_lens_file_exits_2_with_one_line(tmp_path: Path) -> None:
     assert proc.returncode == 2
     line = error_line(proc)
     assert str(path) in line and "[zoom.calibration]" in line and "not monotone" in line
+
+
+def _shot(focal: list[float], focus: list[float], stop: list[float]) -> Any:
+    """The lens channels of a shot, as :func:`camtraj.usd_shot.read_shot` gives them."""
+    return SimpleNamespace(frames=np.arange(101, 101 + len(focal)),
+                           focal_length_mm=np.array(focal), focus_distance_m=np.array(focus),
+                           f_stop=np.array(stop))
+
+
+def test_unset_focus_and_stop_hold_at_home(tmp_path: Path) -> None:
+    path = tmp_path / "lens.toml"
+    path.write_text(ZOOM_TEXT.replace("max_jerk = 7200.0", "max_jerk = 7200.0\nhome = 300.0"),
+                    encoding="utf-8")
+    lens = Lens.from_toml(path)
+    q = lens_positions(lens, _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0]))
+    assert q[:, 1].tolist() == [math.radians(300.0)] * 2  # focus home: infinity
+    assert q[:, 2].tolist() == [0.0, 0.0]  # iris home: the first row
+    assert lens_warnings(lens, _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0])) == []
+
+
+@pytest.mark.parametrize(
+    ("focal", "focus", "stop", "words"),
+    [
+        ([24.0, 310.0], [2.0, 2.0], [4.0, 4.0],
+         "focal length 310 mm at frame 102 is beyond the lens's 290 mm"),
+        ([23.0, 30.0], [2.0, 2.0], [4.0, 4.0],
+         "focal length 23 mm at frame 101 is below the lens's 24 mm"),
+        ([30.0, 30.0, 30.0], [2.0, 1.0, 0.4], [4.0, 4.0, 4.0],
+         "focus distance 0.4 m at frame 103 is nearer than the lens's 0.6 m"),
+        ([30.0, 30.0], [2.0, 2.0], [2.0, 4.0],
+         "stop T2 at frame 101 is below the lens's T2.8"),
+    ],
+)
+def test_a_lens_quantity_beyond_the_table_names_the_frame(
+        focal: list[float], focus: list[float], stop: list[float], words: str) -> None:
+    with pytest.raises(LensRangeError) as info:
+        lens_positions(Lens.from_toml(ZOOM), _shot(focal, focus, stop))
+    assert words in str(info.value) and info.value.exit_code == 3
+
+
+def test_prime_and_missing_motor_warnings() -> None:
+    prime = Lens.from_toml(PRIME)
+    shot = _shot([24.0, 57.6], [2.0, 3.0], [2.8, 4.0])
+    assert any("24-57.6 mm" in w and "50 mm prime" in w for w in lens_warnings(prime, shot))
+    commanded = commanded_lens(prime, lens_positions(prime, shot), shot)
+    assert commanded["focal_length_mm"].tolist() == [50.0, 50.0]
+    assert np.abs(commanded["focus_distance_m"] - [2.0, 3.0]).max() < 1e-12
+    assert lens_warnings(prime, _shot([50.0, 50.0], [2.0, 3.0], [2.8, 4.0])) == []
