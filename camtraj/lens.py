@@ -526,11 +526,6 @@ def _with_controller(r: _Reader, controllers: dict[str, Any], axis: LensAxis) ->
     return replace(axis, controller=ControllerUnits(scale=scale, offset=offset, sign=int(sign)))
 
 
-def timed_limits(robot_limits: Limits, lens: Lens | None) -> Limits:
-    """The limits the timing stage works to: the robot's joints, then the lens's motors."""
-    return robot_limits if lens is None else robot_limits.joined(lens.limits())
-
-
 __all__ = [
     "LENS_AXES",
     "QUANTITY",
@@ -542,5 +537,4 @@ __all__ = [
     "lens_from_table",
     "lens_positions",
     "lens_warnings",
-    "timed_limits",
 ]

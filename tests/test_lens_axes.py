@@ -287,3 +287,24 @@ def test_without_a_lens_nothing_changes(dolly: dict[str, Any]) -> None:
     # CameraInfo is the shot's focal length, as before
     usd = dolly["usd"]
     assert np.abs(d["k"][:, 0] / IMAGE_WIDTH * usd["aperture_mm"] - usd["focal_mm"]).max() < 1e-9
+
+
+def test_the_collision_check_runs_with_a_lens(dolly: dict[str, Any]) -> None:
+    """The set's obstacles are checked on the joints of a take that has lens axes too."""
+    folder = dolly["folder"]
+    shot = folder / "dolly_zoom_set.usda"
+    shot.write_text(dolly["shot"].read_text(encoding="utf-8") + '''
+def Cube "wall"
+{
+    double size = 1
+    double3 xformOp:translate = (4.5, 3, 1)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+''', encoding="utf-8")
+    set_file = folder / "set.toml"
+    set_file.write_text('[collision]\nprims = ["/wall"]\nclearance_m = 0.05\n',
+                        encoding="utf-8")
+    result = convert(shot, None, ConvertOptions(lens=str(ZOOM), set_file=str(set_file)))
+    closest = result["collision"]["closest_m"]
+    assert closest is None or closest > 0.05
+    assert {"zoom", "focus", "iris"} <= set(result["peak_use"])
