@@ -1146,6 +1146,7 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
     def rows(values: list[Any], width: int) -> Array:
         return np.array(values, dtype=float).reshape(len(values), width)
 
+    frame_names = _names(frames[0].name) if frames else joint_names
     return ReadTake(
         profile=header.profile,
         library=header.library,
@@ -1162,8 +1163,8 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
         trajectory_qdd=rows([list(p.accelerations) for p in points], n_joints),
         frame_numbers=np.array([m.frame for m in frames], dtype=np.int64),
         frame_times=np.array([m.time for m in frames], dtype=float),
-        frame_names=_names(frames[0].name) if frames else joint_names,
-        frame_q=rows([list(m.position) for m in frames], n_joints),
+        frame_names=frame_names,
+        frame_q=rows([list(m.position) for m in frames], len(frame_names)),  # no lens axes
         target=matrix_from_pose7(rows([_pose7(m.target) for m in frames], 7)),
         achieved=matrix_from_pose7(rows([_pose7(m.achieved) for m in frames], 7)),
         focal_length_mm=np.array([m.focal_length_mm for m in frames], dtype=float),

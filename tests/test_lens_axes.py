@@ -308,3 +308,13 @@ def Cube "wall"
     closest = result["collision"]["closest_m"]
     assert closest is None or closest > 0.05
     assert {"zoom", "focus", "iris"} <= set(result["peak_use"])
+
+
+def test_read_take_reads_a_take_with_lens_axes(dolly: dict[str, Any]) -> None:
+    from camtraj.mcap_io import read_take
+
+    take = read_take(dolly["mcap"])
+    assert take.joint_names == (*JOINT_NAMES, "zoom", "focus", "iris")
+    assert take.q.shape[1] == 11 and take.trajectory_q.shape[1] == 11
+    assert take.frame_names == JOINT_NAMES and take.frame_q.shape[1] == 8
+    assert np.abs(take.focal_length_mm - dolly["usd"]["focal_mm"]).max() < 1e-9
