@@ -226,3 +226,16 @@ def test_prime_and_missing_motor_warnings() -> None:
     assert commanded["focal_length_mm"].tolist() == [50.0, 50.0]
     assert np.abs(commanded["focus_distance_m"] - [2.0, 3.0]).max() < 1e-12
     assert lens_warnings(prime, _shot([50.0, 50.0], [2.0, 3.0], [2.8, 4.0])) == []
+
+
+def test_the_lens_option_travels_with_batch_and_farm_tasks(tmp_path: Path) -> None:
+    from camtraj.farm import _manifest_options
+    from camtraj.inputs import files_read
+    from camtraj.options import ConvertOptions, options_from_json, options_to_args, options_to_json
+
+    options = ConvertOptions(lens=str(ZOOM))
+    assert options_to_args(options)[-2:] == ["--lens", str(ZOOM)]
+    assert options_from_json(options_to_json(options)) == options
+    assert _manifest_options(options_to_json(options), "manifest") == options
+    assert (ZOOM, "the lens file") in files_read([], options)
+    assert "--lens" not in options_to_args(ConvertOptions())
