@@ -228,8 +228,9 @@ class Lens:
                 if a.controller is not None}
 
     def describe(self) -> dict[str, Any]:
-        """A JSON-friendly summary (MCAP metadata, reports): per axis its unit, quantity,
-        range and limits (motor positions in rad)."""
+        """A JSON-friendly summary (MCAP metadata, reports): per axis its position unit, the
+        lens quantity, its calibrated range (in ``quantity_unit``: mm, m or stops; the file's
+        own unit is ``file_unit``) and its limits (rad, per s...)."""
         return {
             "name": self.name,
             "source": self.source,
@@ -238,7 +239,8 @@ class Lens:
                 a.name: {
                     "position_unit": "rad (lens ring angle)",
                     "quantity": QUANTITY[a.name],
-                    "quantity_unit": a.unit,
+                    "quantity_unit": {"zoom": "mm", "focus": "m"}.get(a.name, a.unit),
+                    "file_unit": a.unit,
                     "range": [_json_number(a.calibration.low * 1.0),
                               _json_number(a.calibration.high * 1.0)],
                     "lower": a.lower, "upper": a.upper, "max_velocity": a.velocity,

@@ -239,3 +239,17 @@ def test_the_lens_option_travels_with_batch_and_farm_tasks(tmp_path: Path) -> No
     assert _manifest_options(options_to_json(options), "manifest") == options
     assert (ZOOM, "the lens file") in files_read([], options)
     assert "--lens" not in options_to_args(ConvertOptions())
+
+
+def test_a_focus_table_in_feet(tmp_path: Path) -> None:
+    text = ZOOM_TEXT.replace('unit = "m"', 'unit = "ft"')
+    path = tmp_path / "feet.toml"
+    path.write_text(text, encoding="utf-8")
+    feet = Lens.from_toml(path).axis("focus")
+    assert feet is not None
+    quantity, motor = _rows(text, "focus")
+    finite = [q for q in quantity if math.isfinite(q)]
+    got = feet.calibration.position(np.array(finite) * 0.3048)  # the marks, in metres
+    assert np.abs(got - np.radians(motor[: len(finite)])).max() < 1e-12
+    assert Lens.from_toml(path).describe()["axes"]["focus"]["quantity_unit"] == "m"
+    assert Lens.from_toml(path).describe()["axes"]["focus"]["file_unit"] == "ft"
