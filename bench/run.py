@@ -11,7 +11,8 @@ comes with a ratio against a baseline measured in the same run:
 2. Cold single-pose solves from home to random reachable poses and to the GA paper's case:
    SM against generic SLSQP, the GA paper's GM method rebuilt, and a dense traversal
    (``bench/ik_baselines.py``).
-3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage, and the
+3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage, the MCAP
+   writer's peak memory per film frame (tracemalloc), and the
    ``camtraj convert`` command in a new process (start-up and imports included).
 4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
 5. Maximum feasible speed (the timing stage's ``max_speed``) per shot of issue 13's shot set
@@ -22,7 +23,9 @@ comes with a ratio against a baseline measured in the same run:
    for 240 to 23040 frames, this tree against ``--base-rev``, each in a new process.
 6. ``camtraj place`` on a 10-second shot and the collision check's cost per frame
    (``bench/bench_place.py``).
-7. What ``--report`` adds to the convert of the one-minute shot (``bench/bench_report.py``).
+7. What ``--report`` adds to the convert of the one-minute shot, and ``camtraj report`` of two
+   long takes against ``camtraj info`` of the same files: time ratio, peak memory per film
+   frame and at the frame cap (``bench/bench_report.py``).
 
 numpy, not numba: a numba version of the closed form measured 5x numpy on the old per-frame call
 mix but only 2.4x at >= 256 candidates per call, and costs ~11 s of JIT compilation per process;
@@ -500,13 +503,45 @@ def bench_convert(shot: Path, repeats: int, work: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", "pass"], check=True)
     python_start = time.perf_counter() - t0
-    return {"wall_s": walls, "median_wall_s": walls[mid],
+    log("table 3: the MCAP writer's peak memory (tracemalloc)")
+    return {"writer_memory": writer_memory(shot, options, work / "writer.mcap"),
+            "wall_s": walls, "median_wall_s": walls[mid],
             "cli_wall_s": cli_walls, "cli_median_wall_s": statistics.median(cli_walls),
             "python_start_s": python_start,
             "stages_s": {k: v[mid] for k, v in stages.items() if len(v) == len(walls)},
             "stages_all_runs_s": stages,
             "mcap_bytes": size, "repeats": repeats, "timing": options.timing,
             "default_error": default_error}
+
+
+def writer_memory(shot: Path, options: Any, output: Path) -> dict[str, Any]:
+    """tracemalloc's peak while ``write_take_to`` writes the converted shot (issue 14 §5), per
+    film frame, against two sizes from the same take: its arrays (``TakeData``) and its one
+    /joint_trajectory message (every servo sample, which the MCAP writer copies while it
+    compresses the chunk holding it)."""
+    import tracemalloc
+
+    from mcap.reader import make_reader
+
+    from camtraj.convert import analyse, metadata, take_data
+    from camtraj.mcap_io import TOPIC_TRAJECTORY, write_take_to
+
+    analysis = analyse(shot, options)
+    take = take_data(analysis)
+    info = metadata(analysis, shot, options)
+    n = len(take.frame_times)
+    arrays = sum(v.nbytes for v in vars(take).values() if isinstance(v, np.ndarray))
+    tracemalloc.start()
+    with output.open("wb") as stream:
+        write_take_to(stream, take, analysis.robot, info)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    with output.open("rb") as stream:
+        traj = sum(len(m.data) for _s, _c, m in
+                   make_reader(stream).iter_messages(topics=[TOPIC_TRAJECTORY]))
+    return {"frames": n, "servo_samples": len(take.t), "peak_bytes": peak,
+            "take_array_bytes": arrays, "trajectory_message_bytes": traj,
+            "mcap_bytes": output.stat().st_size}
 
 
 def print_convert(res: dict[str, Any], shot_seconds: float, bare_ik_s: float) -> None:
@@ -538,8 +573,22 @@ def print_convert(res: dict[str, Any], shot_seconds: float, bare_ik_s: float) ->
          f"x{fmt(ratio(ik_s, bare_ik_s))}",
          f"USD rig layer (--usd, stage 'rig') adds "
          f"{fmt(100 * ratio(stages.get('rig', math.nan), wall - stages.get('rig', math.nan)))}"
-         f" % to the convert without it (same runs)"],
+         f" % to the convert without it (same runs)",
+         *_writer_memory_note(res.get("writer_memory"))],
     )
+
+
+def _writer_memory_note(mem: dict[str, Any] | None) -> list[str]:
+    if not mem:
+        return []
+    n = mem["frames"]
+    return [f"MCAP writer peak memory (tracemalloc, writing the same take): "
+            f"{fmt(mem['peak_bytes'] / n / 1e3)} KB per film frame; x the take's arrays "
+            f"({fmt(mem['take_array_bytes'] / n / 1e3)} KB/frame): "
+            f"{fmt(ratio(mem['peak_bytes'], mem['take_array_bytes']))}; x its /joint_trajectory "
+            f"message ({fmt(mem['trajectory_message_bytes'] / n / 1e3)} KB/frame, "
+            f"{mem['servo_samples']} servo samples): "
+            f"{fmt(ratio(mem['peak_bytes'], mem['trajectory_message_bytes']))}"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -972,10 +1021,15 @@ def main(argv: list[str] | None = None) -> int:
         results["solver_performance"] = perf
         print_perf(perf)
 
-        from bench_report import bench_report, print_report
+        from bench_report import bench_report, bench_report_file, print_report, print_report_file
 
         results["report"] = bench_report(shot, work)
         print_report(results["report"])
+        try:
+            results["report_file"] = bench_report_file(work, load_make_samples(), quick)
+        except (subprocess.SubprocessError, OSError, ValueError) as exc:
+            results["report_file"] = {"skipped": f"{type(exc).__name__}: {exc}"[-300:]}
+        print_report_file(results["report_file"])
 
     est_shot = 240.0 / seq["shot"]["fps"] + 0.5
     batch = bench_batch(quick, est_shot)

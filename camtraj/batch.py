@@ -701,5 +701,5 @@ def batch_command(
         ctx.exit(exc.exit_code)
     click.echo(report.table())
     for r in report.failed:
-        click.echo(f"ERROR: {r.shot}: {r.reason}", err=True)
+        click.echo(one_line(f"ERROR: {r.shot}: {r.reason}"), err=True)
     ctx.exit(report.exit_code)

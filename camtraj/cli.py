@@ -25,7 +25,7 @@ from camtraj.errors import CamtrajError, CollisionError, InputError, Unreachable
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
-from camtraj.shown import percent, seconds, speed_percent
+from camtraj.shown import edge_use, percent, seconds, speed_percent
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -466,16 +466,6 @@ def _pct(x: float) -> str:
     return percent(x).rjust(5)
 
 
-def _edge_use(r: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """Per axis, the run-up's and run-out's peak acceleration and jerk use (the larger)."""
-    out = {}
-    for name, _ in _axes(r["peak_use"]):
-        parts = [r[k].get("peak_use", {}).get(name, {}) for k in ("runup", "runout")]
-        out[name] = {q: max((p.get(q, 0.0) for p in parts), default=0.0)
-                     for q in ("acceleration", "jerk")}
-    return out
-
-
 def _report(r: dict[str, Any]) -> str:
     """The human-readable report of a convert / check run."""
     if r["status"] == "unreachable":
@@ -515,7 +505,8 @@ def _report(r: dict[str, Any]) -> str:
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
         "(extent)   margin  to start",
     ]
-    ends = _edge_use(r)
+    ends = edge_use(r["runup"].get("peak_use", {}), r["runout"].get("peak_use", {}),
+                    [name for name, _ in _axes(r["peak_use"])])
     margins, start = r["margins"], r["move_to_start"]
     for name, revolute in _axes(r["peak_use"]):
         use = r["peak_use"].get(name, {})

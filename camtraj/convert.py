@@ -339,6 +339,10 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "position_range": json.dumps(take.report.position_range, sort_keys=True),
         # The margins the terminal prints, for the report of the file.
         "margins": json.dumps(margins_summary(analysis.path, shot.frames), sort_keys=True),
+        # The run-up's and run-out's own peak use, for the report's "ends" columns.
+        "edge_peak_use": json.dumps({"runup": take.report.runup.get("peak_use", {}),
+                                     "runout": take.report.runout.get("peak_use", {})},
+                                    sort_keys=True),
         # With a lens only: its axes after the joints, their units and calibrated ranges.
         **({} if robot.lens is None else {"lens": json.dumps(robot.lens.describe())}),
     }

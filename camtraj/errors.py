@@ -5,11 +5,25 @@ Exit codes (design.md §5): 2 for bad input or usage, 3 when the shot cannot be 
 
 from __future__ import annotations
 
+import os
+
+
+def one_line(text: str | os.PathLike[str]) -> str:
+    """A path or a message as printed on one line: a newline or other character that does
+    not print (in a file name, say) is shown escaped as in a Python string (``\\n``)."""
+    text = os.fsdecode(text)
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
 
 class CamtrajError(Exception):
-    """Base class of every error camtraj raises on purpose."""
+    """Base class of every error camtraj raises on purpose; its text is one line."""
 
     exit_code = 1
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
 
 
 class InputError(CamtrajError):

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from camtraj import interrupts
-from camtraj.errors import InputError, LensFileError, RobotFileError, ShotFileError
+from camtraj.errors import InputError, LensFileError, RobotFileError, ShotFileError, one_line
 from camtraj.options import ConvertOptions
 
 __all__ = [
@@ -42,15 +42,6 @@ _KIND = {
 
 MAX_TEXT_BYTES = 64 * 1024 * 1024
 """Largest robot, set or manifest file read [bytes]; more is not a hand-written file."""
-
-
-def one_line(path: str | os.PathLike[str]) -> str:
-    """A path as printed in a one-line message: a newline or other control character in a
-    file name is shown escaped, so the message stays one line."""
-    text = os.fsdecode(path)
-    if text.isprintable():
-        return text
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def require_regular_file(path: str | os.PathLike[str], what: str, error: type[InputError]) -> None:

@@ -30,7 +30,7 @@ import math
 import re
 import shlex
 import struct
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata as importlib_metadata
 from pathlib import Path
@@ -90,6 +90,10 @@ TOPICS: dict[str, str] = {
 }
 
 _CHUNK_SIZE = 1024 * 1024
+_WINDOW = 2048
+"""Servo samples per writing window: the writer encodes the take's messages a window of log
+times at a time (and the trajectory's points a window at a time), so its memory does not grow
+with the messages of the whole take."""
 # UsdGeom.Camera's fallback film back, horizontalAperture x verticalAperture [mm].
 _USD_APERTURE_MM = (20.955, 15.2908)
 _NS = 1_000_000_000
@@ -338,7 +342,7 @@ def _encode_trajectory(
     # A point's layout depends only on where it starts modulo 8: one template per phase.
     templates: dict[int, _Cdr] = {}
     starts = np.empty(len(ns), dtype=np.int64)
-    phases = np.empty(len(ns), dtype=np.int64)
+    phases = np.empty(len(ns), dtype=np.uint8)
     pos = head.position
     for i in range(len(ns)):
         phase = pos % 8
@@ -354,23 +358,31 @@ def _encode_trajectory(
         starts[i] = pos
         phases[i] = phase
         pos += len(tpl.buf)
-    body = np.empty(pos - head.position, dtype=np.uint8)
-    sec, nanosec = np.divmod(ns, _NS)
-    for phase, tpl in templates.items():
-        idx = np.flatnonzero(phases == phase)
-        rows = tpl.fill(
-            {
-                "positions": q[idx],
-                "velocities": qd[idx],
-                "accelerations": qdd[idx],
-                "time_from_start.sec": sec[idx],
-                "time_from_start.nanosec": nanosec[idx],
-            },
-            len(idx),
-        )
-        where = (starts[idx] - head.position)[:, None] + np.arange(rows.shape[1])
-        body[where] = rows
-    return bytes(head.buf) + body.tobytes()
+    message = bytearray(len(head.buf) + pos - head.position)
+    message[: len(head.buf)] = head.buf
+    body = np.frombuffer(message, dtype=np.uint8)
+    starts += len(head.buf) - head.position
+    # A window of points at a time: the scratch arrays stay small whatever the take's length.
+    for a in range(0, len(ns), _WINDOW):
+        b = min(a + _WINDOW, len(ns))
+        sec, nanosec = np.divmod(ns[a:b], _NS)
+        for phase, tpl in templates.items():
+            idx = np.flatnonzero(phases[a:b] == phase)
+            if not idx.size:  # no point of this window starts at this phase
+                continue
+            rows = tpl.fill(
+                {
+                    "positions": q[a + idx],
+                    "velocities": qd[a + idx],
+                    "accelerations": qdd[a + idx],
+                    "time_from_start.sec": sec[idx],
+                    "time_from_start.nanosec": nanosec[idx],
+                },
+                len(idx),
+            )
+            body[starts[a + idx][:, None] + np.arange(rows.shape[1])] = rows
+    del body
+    return bytes(message)
 
 
 def _encode_tf(
@@ -390,7 +402,8 @@ def _encode_tf(
     return _split_rows(tpl.fill(values, len(ns)))
 
 
-def _encode_shot_frames(take: TakeData) -> list[bytes]:
+def _encode_shot_frames(take: TakeData, frames: slice = slice(None)) -> list[bytes]:
+    """The /shot/frames messages of the film frames ``frames`` (default all)."""
     tpl = _Cdr()
     tpl.slot("frame", "<i4")
     tpl.slot("time", "<f8")
@@ -400,31 +413,37 @@ def _encode_shot_frames(take: TakeData) -> list[bytes]:
     tpl.slot("target", "<f8", 7)
     tpl.slot("achieved", "<f8", 7)
     tpl.slot("lens", "<f8", 3)
-    lens = np.stack([take.focal_length_mm, take.focus_distance_m, take.f_stop], axis=-1)
+    lens = np.stack([take.focal_length_mm[frames], take.focus_distance_m[frames],
+                     take.f_stop[frames]], axis=-1)
     values: dict[str, ArrayLike] = {
-        "frame": take.frame_numbers,
-        "time": take.frame_times,
-        "position": take.frame_q,
-        "target": pose7_from_matrix(take.target),
-        "achieved": pose7_from_matrix(take.achieved),
+        "frame": take.frame_numbers[frames],
+        "time": take.frame_times[frames],
+        "position": take.frame_q[frames],
+        "target": pose7_from_matrix(take.target[frames]),
+        "achieved": pose7_from_matrix(take.achieved[frames]),
         "lens": lens,
     }
-    return _split_rows(tpl.fill(values, len(take.frame_times)))
+    return _split_rows(tpl.fill(values, len(lens)))
 
 
-def _encode_camera_info(take: TakeData) -> list[bytes]:
-    """One CameraInfo per film frame, stamped at its take time, in the optical frame."""
+def _encode_camera_info(take: TakeData, frames: slice = slice(None)) -> list[bytes]:
+    """One CameraInfo per film frame of ``frames`` (default all), stamped at its take time,
+    in the optical frame."""
     assert take.horizontal_aperture_mm is not None and take.vertical_aperture_mm is not None
-    n = len(take.frame_times)
+    assert take.horizontal_aperture_offset_mm is not None
+    assert take.vertical_aperture_offset_mm is not None
+    frame_times = take.frame_times[frames]
+    n = len(frame_times)
     # One image size for the take (the first frame's aspect); an animated film back changes
     # the intrinsics, not the size.
     height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
-                               IMAGE_WIDTH)[0]) if n else 1
+                               IMAGE_WIDTH)[0]) if len(take.frame_times) else 1
     focal = (take.focal_length_mm if take.camera_focal_length_mm is None
-             else take.camera_focal_length_mm)
-    K = camera_matrices(focal, take.horizontal_aperture_mm,
-                        take.vertical_aperture_mm, IMAGE_WIDTH, height,
-                        take.horizontal_aperture_offset_mm, take.vertical_aperture_offset_mm)
+             else take.camera_focal_length_mm)  # with a lens: the focal length it gives
+    K = camera_matrices(focal[frames], take.horizontal_aperture_mm[frames],
+                        take.vertical_aperture_mm[frames], IMAGE_WIDTH, height,
+                        take.horizontal_aperture_offset_mm[frames],
+                        take.vertical_aperture_offset_mm[frames])
     P = np.concatenate([K, np.zeros((n, 3, 1))], axis=2)
     tpl = _Cdr()
     tpl.slot_time("stamp")
@@ -440,7 +459,7 @@ def _encode_camera_info(take: TakeData) -> list[bytes]:
         tpl.u32(0)
     tpl.buf += b"\x00"  # roi.do_rectify: false
     values: dict[str, ArrayLike] = {
-        **_stamp_values("stamp", seconds_to_ns(take.frame_times)),
+        **_stamp_values("stamp", seconds_to_ns(frame_times)),
         "height": np.full(n, height),
         "width": np.full(n, IMAGE_WIDTH),
         "d": np.zeros((n, 5)),
@@ -789,74 +808,13 @@ def write_take_to(
         if not isinstance(key, str) or not isinstance(value, str):
             msg = f"metadata must map strings to strings; got {key!r}: {value!r}"
             raise TypeError(msg)
-    records = _build_records(take, robot)
-    _write_mcap(stream, records, dict(metadata), _robot_metadata(robot))
-
-
-@dataclass(frozen=True)
-class _Records:
-    """Encoded messages per topic: (log time [ns], CDR bytes) lists, in topic order."""
-
-    messages: dict[str, list[tuple[int, bytes]]]
-
-
-def _build_records(take: TakeData, robot: Robot) -> _Records:
-    names = take.joint_names
-    ns = seconds_to_ns(take.t)
-    messages: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in TOPICS}
-
-    messages[TOPIC_DESCRIPTION].append((0, _encode_string(robot_urdf(robot))))
-
-    statics = [
-        Transform(WORLD_FRAME, BASE_FRAME, take.base2world),
-        *static_transforms(robot),
-    ]
-    messages[TOPIC_TF_STATIC] = list(
-        zip(
-            [0],
-            _encode_tf(
-                [(s.parent, s.child) for s in statics],
-                np.zeros(1, dtype=np.int64),
-                [pose7_from_matrix(s.child2parent)[None, :] for s in statics],
-            ),
-            strict=True,
-        )
-    )
-
-    messages[TOPIC_TRAJECTORY].append(
-        (0, _encode_trajectory(names, ns, take.q, take.qd, take.qdd))
-    )
-    messages[TOPIC_JOINT_STATES] = list(
-        zip(ns.tolist(), _encode_joint_states(names, ns, take.q, take.qd), strict=True)
-    )
-
-    times = tf_times(take)
-    tf_ns = seconds_to_ns(times)
-    nj = len(names) - len(take.lens_names)  # the joints; lens motors move no link
-    moving = link_transforms(robot, interpolate_servo(take.t, take.q[:, :nj], take.qd[:, :nj],
-                                                      times))
-    messages[TOPIC_TF] = list(
-        zip(
-            tf_ns.tolist(),
-            _encode_tf(
-                [(m.parent, m.child) for m in moving],
-                tf_ns,
-                [pose7_from_matrix(m.child2parent) for m in moving],
-            ),
-            strict=True,
-        )
-    )
-
-    if len(take.frame_times):
-        frame_ns = seconds_to_ns(take.frame_times).tolist()
-        messages[TOPIC_FRAMES] = list(zip(frame_ns, _encode_shot_frames(take), strict=True))
-        messages[TOPIC_CAMERA_INFO] = list(zip(frame_ns, _encode_camera_info(take), strict=True))
-    return _Records(messages)
+    _write_mcap(stream, take, robot, dict(metadata), _robot_metadata(robot))
 
 
 def _write_mcap(
     stream: IO[bytes],
-    records: _Records,
+    take: TakeData,
+    robot: Robot,
     metadata: dict[str, str],
     robot_metadata: dict[str, str],
 ) -> None:
@@ -877,35 +835,83 @@ def _write_mcap(
             encoding="ros2msg",
             data=message_definition(schema_name).encode("utf-8"),
         )
-    channel_ids = {
-        topic: writer.register_channel(
+    channel_ids = [
+        writer.register_channel(
             topic=topic,
             message_encoding="cdr",
             schema_id=schema_ids[schema_name],
             metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
         )
         for topic, schema_name in TOPICS.items()
-    }
+    ]
     # All messages in log-time order; same-time messages in topic order, then sequence.
-    queue: list[tuple[int, int, int, bytes]] = []
-    for rank, topic in enumerate(TOPICS):
-        queue.extend(
-            (log_ns, rank, seq, data) for seq, (log_ns, data) in enumerate(records.messages[topic])
-        )
-    queue.sort(key=lambda item: (item[0], item[1], item[2]))
-    topics = list(TOPICS)
-    add = writer.add_message
-    for log_ns, rank, seq, data in queue:
-        add(
-            channel_id=channel_ids[topics[rank]],
-            log_time=log_ns,
-            data=data,
-            publish_time=log_ns,
-            sequence=seq,
-        )
+    for log_ns, rank, seq, data in _messages(take, robot):
+        writer.add_message(channel_id=channel_ids[rank], log_time=log_ns, data=data,
+                           publish_time=log_ns, sequence=seq)
     writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
     writer.add_metadata(ROBOT_METADATA_NAME, robot_metadata)
     writer.finish()  # type: ignore[no-untyped-call]
+
+
+def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, bytes]]:
+    """Every message of the take as ``(log time [ns], topic rank in TOPICS, sequence, CDR)``,
+    in log-time order (same-time messages in topic order, then sequence).
+
+    The messages at t = 0 (the URDF, /tf_static, the whole /joint_trajectory) come first; the
+    streams (/joint_states, /tf, /camera/camera_info, /shot/frames) are encoded a window of
+    log times at a time (:data:`_WINDOW` servo samples), so the messages in memory at once do
+    not grow with the take.
+    """
+    rank = {topic: i for i, topic in enumerate(TOPICS)}
+    names = take.joint_names
+    yield 0, rank[TOPIC_DESCRIPTION], 0, _encode_string(robot_urdf(robot))
+    statics = [Transform(WORLD_FRAME, BASE_FRAME, take.base2world), *static_transforms(robot)]
+    yield 0, rank[TOPIC_TF_STATIC], 0, _encode_tf(
+        [(s.parent, s.child) for s in statics], np.zeros(1, dtype=np.int64),
+        [pose7_from_matrix(s.child2parent)[None, :] for s in statics])[0]
+    servo_ns = seconds_to_ns(take.t)
+    yield 0, rank[TOPIC_TRAJECTORY], 0, _encode_trajectory(names, servo_ns, take.q, take.qd,
+                                                           take.qdd)
+
+    times = tf_times(take)
+    tf_ns = seconds_to_ns(times)
+    frame_ns = seconds_to_ns(take.frame_times)
+    nj = len(names) - len(take.lens_names)  # the joints; a lens's motors move no link
+    tf_frames = [(m.parent, m.child) for m in link_transforms(robot, take.q[0, :nj])]
+    # Window w holds the messages logged in [servo_ns[w * _WINDOW], servo_ns[(w + 1) * _WINDOW]).
+    bounds = servo_ns[_WINDOW::_WINDOW]
+
+    def cuts(ns: NDArray[np.int64]) -> list[int]:
+        return [0, *np.searchsorted(ns, bounds, side="left").tolist(), len(ns)]
+
+    servo_cuts, tf_cuts, frame_cuts = cuts(servo_ns), cuts(tf_ns), cuts(frame_ns)
+    for w in range(len(bounds) + 1):
+        parts: list[tuple[NDArray[np.int64], int, int, list[bytes]]] = []
+        a, b = servo_cuts[w], servo_cuts[w + 1]
+        if b > a:
+            parts.append((servo_ns[a:b], rank[TOPIC_JOINT_STATES], a, _encode_joint_states(
+                names, servo_ns[a:b], take.q[a:b], take.qd[a:b])))
+        a, b = tf_cuts[w], tf_cuts[w + 1]
+        if b > a:
+            moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd,
+                                                              times[a:b])[:, :nj])
+            parts.append((tf_ns[a:b], rank[TOPIC_TF], a, _encode_tf(
+                tf_frames, tf_ns[a:b], [pose7_from_matrix(m.child2parent) for m in moving])))
+        a, b = frame_cuts[w], frame_cuts[w + 1]
+        if b > a:
+            parts.append((frame_ns[a:b], rank[TOPIC_CAMERA_INFO], a,
+                          _encode_camera_info(take, slice(a, b))))
+            parts.append((frame_ns[a:b], rank[TOPIC_FRAMES], a,
+                          _encode_shot_frames(take, slice(a, b))))
+        if not parts:
+            continue
+        log = np.concatenate([p[0] for p in parts])
+        ranks = np.concatenate([np.full(len(p[3]), p[1]) for p in parts])
+        seqs = np.concatenate([np.arange(p[2], p[2] + len(p[3])) for p in parts])
+        data = [d for p in parts for d in p[3]]
+        del parts
+        for i in np.lexsort((seqs, ranks, log)).tolist():
+            yield int(log[i]), int(ranks[i]), int(seqs[i]), data[i]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1059,6 +1065,26 @@ def _names(values: Iterable[str]) -> tuple[str, ...]:
     return tuple(str(v) for v in values)
 
 
+def _check_topics(path: Path, present: set[str]) -> None:
+    """A camtraj take has every topic of :data:`TOPICS`."""
+    missing = [t for t in TOPICS if t not in present]
+    if missing:
+        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
+        raise InputError(msg)
+
+
+def _check_counts(path: Path, counts: Mapping[str, int]) -> None:
+    """A camtraj take has one message at t = 0 on each of /joint_trajectory,
+    /robot_description and /tf_static, and at least one on /joint_states."""
+    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
+        if counts.get(topic, 0) != 1:
+            msg = f"{path}: {topic} has {counts.get(topic, 0)} messages, expected 1"
+            raise InputError(msg)
+    if counts.get(TOPIC_JOINT_STATES, 0) < 1:
+        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
+        raise InputError(msg)
+
+
 def read_take(path: str | Path) -> ReadTake:
     """Read a camtraj MCAP file back, decoding every message with mcap_ros2.
 
@@ -1079,10 +1105,7 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
         msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
         raise InputError(msg)
     topics_present = {ch.topic for ch in summary.channels.values()}
-    missing = [t for t in TOPICS if t not in topics_present]
-    if missing:
-        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
-        raise InputError(msg)
+    _check_topics(path, topics_present)
 
     by_topic: dict[str, list[Any]] = {t: [] for t in topics_present}
     times: dict[str, list[tuple[int, int]]] = {t: [] for t in topics_present}
@@ -1107,15 +1130,9 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
             log_time_ns=lt,
             publish_time_ns=pt,
         )
-    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
-        if len(by_topic[topic]) != 1:
-            msg = f"{path}: {topic} has {len(by_topic[topic])} messages, expected 1"
-            raise InputError(msg)
+    _check_counts(path, {topic: len(messages) for topic, messages in by_topic.items()})
 
     js = by_topic[TOPIC_JOINT_STATES]
-    if not js:
-        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
-        raise InputError(msg)
     joint_names = _names(js[0].name)
     traj = by_topic[TOPIC_TRAJECTORY][0]
     points = traj.points
@@ -1180,205 +1197,294 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
     )
 
 
-def read_take_for_report(path: str | Path) -> ReadTake:
-    """Read what ``camtraj report`` needs, in memory proportional to the arrays it keeps.
+@dataclass(frozen=True, eq=False)  # arrays: compare fields, not objects
+class ReportTake:
+    """What ``camtraj report`` reads from a camtraj MCAP: no per-sample arrays.
 
-    :func:`read_take` decodes every message into Python objects (about 50 KB per film
-    frame). This reader streams the messages one at a time, skips /joint_states (the
-    ``t``, ``q``, ``qd`` and ``effort_sizes`` fields come back empty, ``topics`` too) and
-    decodes the single /joint_trajectory message straight from its CDR bytes into arrays.
+    The servo samples stay as the /joint_trajectory message's CDR bytes and are decoded a
+    block at a time (:meth:`trajectory_blocks`); /tf is read only at a few times.
+
+    Attributes:
+        source: The file (for messages).
+        joint_names: /joint_trajectory joint names. stamp: Its header stamp [s].
+        point_count: Its number of points (servo samples).
+        first_time, last_time: time_from_start of its first and last point [s].
+        frame_numbers: /shot/frames frame, shape (n,). frame_times: Their time [s], (n,).
+        target: Requested camera poses (camera2base), shape (n, 4, 4).
+        tf_count: Number of /tf messages.
+        tf_times: Stamps of the /tf samples read [s], shape (k,).
+        tf: child frame -> (parent frame, child2parent at those samples, (k, 4, 4)).
+        tf_static: child frame -> (parent frame, child2parent (4, 4)).
+        metadata: The ``camtraj`` metadata record. all_metadata: Every record by name.
+    """
+
+    source: Path
+    joint_names: tuple[str, ...]
+    stamp: float
+    point_count: int
+    first_time: float
+    last_time: float
+    frame_numbers: NDArray[np.int64]
+    frame_times: Array
+    target: Array
+    tf_count: int
+    tf_times: Array
+    tf: dict[str, tuple[str, Array]]
+    tf_static: dict[str, tuple[str, Array]]
+    metadata: dict[str, str]
+    all_metadata: dict[str, dict[str, str]]
+    trajectory_cdr: bytes = field(repr=False)
+
+    def trajectory_blocks(
+        self, size: int = 8192
+    ) -> Iterable[tuple[Array, Array, Array, Array]]:
+        """The servo samples in time order, ``size`` points at a time: ``(t, q, qd, qdd)``,
+        shapes (b,) and (b, 8) each (``t``: time_from_start [s])."""
+        layout = _TrajectoryLayout.parse(self.source, self.trajectory_cdr)
+        for a in range(0, layout.count, size):
+            yield layout.points(np.arange(a, min(a + size, layout.count)))
+
+    def count_before(self, times: ArrayLike, size: int = 65536) -> NDArray[np.int64]:
+        """How many servo samples come before each of ``times`` [s]."""
+        layout = _TrajectoryLayout.parse(self.source, self.trajectory_cdr)
+        when = np.asarray(times, dtype=float)
+        out = np.zeros(when.shape, dtype=np.int64)
+        for a in range(0, layout.count, size):
+            t = layout.times(np.arange(a, min(a + size, layout.count)))
+            out += np.searchsorted(t, when, side="left")
+        return out
+
+
+def read_take_for_report(
+    path: str | Path, tf_at: Callable[[Array], Array] | None = None
+) -> ReportTake:
+    """Read what ``camtraj report`` needs, in memory that does not grow with the servo samples
+    beyond the one /joint_trajectory message's bytes.
+
+    Decodes /shot/frames and /tf_static; /tf only at the messages nearest (by log time, the
+    stamp camtraj writes) to the times ``tf_at(frame_times)`` [s] asks for (none without
+    ``tf_at``); /joint_states not at all.
 
     Raises:
         InputError: As :func:`read_take`.
     """
     path = Path(path)
     with _open_for_reading(path) as stream:
-        result: ReadTake = _guard(path, lambda: _read_for_report(path, stream))
+        result: ReportTake = _guard(path, lambda: _read_for_report(path, stream, tf_at))
     return result
 
 
-def _read_for_report(path: Path, stream: IO[bytes]) -> ReadTake:
+def _read_for_report(
+    path: Path, stream: IO[bytes], tf_at: Callable[[Array], Array] | None
+) -> ReportTake:
     reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
-    header = reader.get_header()
     summary = reader.get_summary()
     if summary is None or summary.statistics is None:
         msg = f"{path}: the MCAP file has no summary section (was it written completely?)"
         raise InputError(msg)
-    topics_present = {ch.topic for ch in summary.channels.values()}
-    missing = [t for t in TOPICS if t not in topics_present]
-    if missing:
-        msg = f"{path}: not a camtraj take: topic(s) missing: {', '.join(missing)}"
-        raise InputError(msg)
+    _check_topics(path, {ch.topic for ch in summary.channels.values()})
     counts = {summary.channels[cid].topic: int(n)
               for cid, n in summary.statistics.channel_message_counts.items()
               if cid in summary.channels}
-    for topic in (TOPIC_TRAJECTORY, TOPIC_DESCRIPTION, TOPIC_TF_STATIC):
-        if counts.get(topic, 0) != 1:
-            msg = f"{path}: {topic} has {counts.get(topic, 0)} messages, expected 1"
-            raise InputError(msg)
-    if counts.get(TOPIC_JOINT_STATES, 0) < 1:
-        msg = f"{path}: {TOPIC_JOINT_STATES} has no messages"
-        raise InputError(msg)
+    _check_counts(path, counts)
+    all_metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
 
-    # The trajectory first: its bytes are freed before the other arrays grow.
-    traj_data: bytes = b""
-    for _schema, _channel, message in reader.iter_messages(topics=[TOPIC_TRAJECTORY]):
-        traj_data = message.data
-    names, stamp, t, q, qd, qdd = _decode_trajectory(path, traj_data)
-    del traj_data, message
-    # /shot/frames and /tf: one decoded message at a time into preallocated arrays.
+    # /shot/frames (one decoded message at a time into preallocated arrays) and /tf_static.
     n = counts.get(TOPIC_FRAMES, 0)
     frame_numbers = np.zeros(n, dtype=np.int64)
     frame_times = np.zeros(n)
-    pose7 = np.zeros((2, n, 7))
-    lens = np.zeros((3, n))
-    frame_q: list[Array] = []
-    frame_names: tuple[str, ...] = ()
-    k = counts.get(TOPIC_TF, 0)
-    tf_times = np.zeros(k)
-    tf7: dict[str, tuple[str, Array]] = {}
+    target7 = np.zeros((n, 7))
     tf_static: dict[str, tuple[str, Array]] = {}
-    description = ""
-    i_frame = i_tf = 0
+    i = 0
     for _schema, channel, _message, decoded in reader.iter_decoded_messages(
-        topics=[TOPIC_FRAMES, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_DESCRIPTION],
-        log_time_order=False,
+        topics=[TOPIC_FRAMES, TOPIC_TF_STATIC], log_time_order=False
     ):
-        topic = channel.topic
-        if topic == TOPIC_FRAMES:
-            if i_frame == 0:
-                frame_names = _names(decoded.name)
-            frame_numbers[i_frame] = decoded.frame
-            frame_times[i_frame] = decoded.time
-            pose7[0, i_frame] = _pose7(decoded.target)
-            pose7[1, i_frame] = _pose7(decoded.achieved)
-            lens[:, i_frame] = (decoded.focal_length_mm, decoded.focus_distance_m,
-                                decoded.f_stop)
-            frame_q.append(np.asarray(decoded.position, dtype=float))
-            i_frame += 1
-        elif topic == TOPIC_TF:
-            if decoded.transforms:
-                tf_times[i_tf] = _stamp(decoded.transforms[0].header.stamp)
-            for tr in decoded.transforms:
-                child = str(tr.child_frame_id)
-                if child not in tf7:
-                    tf7[child] = (str(tr.header.frame_id), np.zeros((k, 7)))
-                tf7[child][1][i_tf] = _transform7(tr.transform)
-            i_tf += 1
-        elif topic == TOPIC_TF_STATIC:
+        if channel.topic == TOPIC_FRAMES:
+            frame_numbers[i], frame_times[i] = decoded.frame, decoded.time
+            target7[i] = _pose7(decoded.target)
+            i += 1
+        else:
             tf_static = {
                 str(tr.child_frame_id): (str(tr.header.frame_id),
                                          matrix_from_pose7(np.array(_transform7(tr.transform))))
                 for tr in decoded.transforms}
-        else:
-            description = str(decoded.data)
-    all_metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
-    n_joints = len(names)
-    empty = np.zeros((0, n_joints))
-    return ReadTake(
-        profile=header.profile, library=header.library, joint_names=names, t=np.zeros(0),
-        q=empty, qd=empty, effort_sizes=np.zeros(0, dtype=np.int64),
-        trajectory_joint_names=names, trajectory_stamp=stamp, trajectory_t=t,
-        trajectory_q=q, trajectory_qd=qd, trajectory_qdd=qdd,
-        frame_numbers=frame_numbers[:i_frame], frame_times=frame_times[:i_frame],
-        frame_names=frame_names or names,
-        frame_q=np.array(frame_q, dtype=float).reshape(len(frame_q), -1) if frame_q
-        else empty,
-        target=matrix_from_pose7(pose7[0, :i_frame]),
-        achieved=matrix_from_pose7(pose7[1, :i_frame]),
-        focal_length_mm=lens[0, :i_frame], focus_distance_m=lens[1, :i_frame],
-        f_stop=lens[2, :i_frame], tf_times=tf_times[:i_tf],
-        tf={c: (p, matrix_from_pose7(v[:i_tf])) for c, (p, v) in tf7.items()},
-        tf_static=tf_static, robot_description=description,
-        metadata=all_metadata.get(METADATA_NAME, {}), all_metadata=all_metadata, topics={},
+    frame_times = frame_times[:i]
+
+    # /tf at the times asked for: the nearest message by log time, decoded alone.
+    wanted = np.asarray(tf_at(frame_times), dtype=float) if tf_at is not None else np.zeros(0)
+    tf_msgs = [m for m in (_nearest_tf(reader, summary, w) for w in wanted) if m is not None]
+    tf: dict[str, tuple[str, Array]] = {}
+    for j, msg_ in enumerate(tf_msgs):
+        for tr in msg_.transforms:
+            child = str(tr.child_frame_id)
+            if child not in tf:
+                tf[child] = (str(tr.header.frame_id), np.tile(np.eye(4), (len(tf_msgs), 1, 1)))
+            tf[child][1][j] = matrix_from_pose7(np.array(_transform7(tr.transform)))
+
+    # /joint_trajectory last: its bytes are what stays.
+    data = next(m.data for _s, _c, m in reader.iter_messages(topics=[TOPIC_TRAJECTORY]))
+    layout = _TrajectoryLayout.parse(path, data)
+    ends = layout.points(np.array([0, layout.count - 1])) if layout.count else None
+    return ReportTake(
+        source=path, joint_names=layout.names, stamp=layout.stamp,
+        point_count=layout.count,
+        first_time=float(ends[0][0]) if ends else math.nan,
+        last_time=float(ends[0][-1]) if ends else math.nan,
+        frame_numbers=frame_numbers[:i], frame_times=frame_times,
+        target=matrix_from_pose7(target7[:i]), tf_count=counts.get(TOPIC_TF, 0),
+        tf_times=np.array([_stamp(m.transforms[0].header.stamp) if m.transforms else math.nan
+                           for m in tf_msgs]),
+        tf=tf, tf_static=tf_static, metadata=all_metadata.get(METADATA_NAME, {}),
+        all_metadata=all_metadata, trajectory_cdr=data,
     )
 
 
-def _decode_trajectory(
-    path: Path, data: bytes
-) -> tuple[tuple[str, ...], float, Array, Array, Array, Array]:
-    """A trajectory_msgs/JointTrajectory from its CDR bytes (little-endian), as arrays.
+def _nearest_tf(reader: Any, summary: Any, when: float) -> Any:
+    """The decoded /tf message whose log time is nearest ``when`` [s] (the first of equals):
+    looked for within a second, then in the whole topic; None without /tf messages."""
+    if not math.isfinite(when):
+        return None
+    ns = round(when * _NS)
+    for window in (_NS, None):
+        span = {} if window is None else {"starting_at": max(0, ns - window),
+                                          "ending_at": ns + window}
+        best: tuple[int, Any, Any] | None = None
+        for schema, _channel, message in reader.iter_messages(
+            topics=[TOPIC_TF], log_time_order=True, **span
+        ):
+            gap = abs(message.log_time - ns)
+            if best is None or gap < best[0]:
+                best = (gap, schema, message)
+        if best is not None:
+            decoder = DecoderFactory().decoder_for("cdr", best[1])
+            assert decoder is not None
+            return decoder(best[2].data)
+    return None
+
+
+@dataclass(frozen=True)
+class _TrajectoryLayout:
+    """Where the points of a trajectory_msgs/JointTrajectory sit in its CDR bytes
+    (little-endian).
 
     Each point holds three sequences of as many float64 as joint names (positions,
-    velocities, accelerations), an empty effort and time_from_start; the reader checks
-    every sequence length and reads the numbers with numpy, a block of points at a time.
-
-    Returns:
-        ``(joint_names, stamp, t, q, qd, qdd)``.
+    velocities, accelerations), an empty effort and time_from_start. Its layout depends only
+    on where it starts modulo 8, so the points' offsets repeat with a period of one or two
+    points and are computed, not walked.
     """
-    def bad(what: str) -> InputError:
-        return InputError(f"{path}: {TOPIC_TRAJECTORY} is not a joint trajectory camtraj "
-                          f"reads ({what})")
 
-    if data[:2] != b"\x00\x01":  # CDR, little-endian
-        raise bad("not little-endian CDR")
-    body = memoryview(data)[4:]
-    pos = 0
+    source: Path
+    names: tuple[str, ...]
+    stamp: float
+    count: int
+    body: NDArray[np.uint8]
+    first: int  # offset of the first point in the body
+    layouts: dict[int, tuple[list[int], list[int], int]]  # phase -> counts, values, size
 
-    def u32() -> int:
-        nonlocal pos
-        pos += -pos % 4
-        (value,) = struct.unpack_from("<I", body, pos)
-        pos += 4
-        return int(value)
+    def bad(self, what: str) -> InputError:
+        return _bad_trajectory(self.source, what)
 
-    def text() -> str:
-        nonlocal pos
-        size = u32()
-        raw = bytes(body[pos: pos + size])
-        pos += size
-        return raw.rstrip(b"\x00").decode("utf-8")
+    @classmethod
+    def parse(cls, path: Path, data: bytes) -> _TrajectoryLayout:
+        if data[:2] != b"\x00\x01":  # CDR, little-endian
+            raise _bad_trajectory(path, "not little-endian CDR")
+        body = memoryview(data)[4:]
+        pos = 0
 
-    sec, nanosec = u32(), u32()
-    stamp = float(np.int32(np.uint32(sec))) + nanosec * 1e-9
-    text()  # frame_id
-    names = tuple(text() for _ in range(u32()))
-    m, w = u32(), len(names)
-    # A point's layout depends only on where it starts modulo 8.
-    layouts: dict[int, tuple[list[int], list[int], int]] = {}
-    for phase in (0, 4):
-        at, counts, offs = phase, [], []
-        for _ in range(3):
+        def u32() -> int:
+            nonlocal pos
+            pos += -pos % 4
+            if pos + 4 > len(body):
+                raise _bad_trajectory(path, "shorter than its header")
+            (value,) = struct.unpack_from("<I", body, pos)
+            pos += 4
+            return int(value)
+
+        def text() -> str:
+            nonlocal pos
+            size = u32()
+            raw = bytes(body[pos: pos + size])
+            pos += size
+            return raw.rstrip(b"\x00").decode("utf-8")
+
+        sec, nanosec = u32(), u32()
+        stamp = float(np.int32(np.uint32(sec))) + nanosec * 1e-9
+        text()  # frame_id
+        names = tuple(text() for _ in range(u32()))
+        m, w = u32(), len(names)
+        layouts: dict[int, tuple[list[int], list[int], int]] = {}
+        for phase in (0, 4):
+            at, counts, offs = phase, [], []
+            for _ in range(3):
+                at += -at % 4
+                counts.append(at - phase)
+                at += 4
+                at += -at % 8
+                offs.append(at - phase)
+                at += 8 * w
             at += -at % 4
-            counts.append(at - phase)
+            counts.append(at - phase)  # effort
             at += 4
-            at += -at % 8
-            offs.append(at - phase)
-            at += 8 * w
-        at += -at % 4
-        counts.append(at - phase)  # effort
-        at += 4
-        layouts[phase] = (counts, offs, at - phase)
-    starts = np.empty(m, dtype=np.int64)
-    phases = np.empty(m, dtype=np.int64)
-    p = pos
-    for i in range(m):
-        p += -p % 4
-        ph = p % 8
-        starts[i], phases[i] = p, ph
-        p += layouts[ph][2] + 8  # + time_from_start (two 4-byte fields)
-    if p > len(body):
-        raise bad("shorter than its points")
-    u8 = np.frombuffer(body, dtype=np.uint8)
-    t, out = np.empty(m), [np.empty((m, w)) for _ in range(3)]
-    lane = np.arange(8 * w)
-    for a in range(0, m, 65536):
-        block, block_phase = starts[a: a + 65536], phases[a: a + 65536]
-        for phase, (count_offs, offs, size) in layouts.items():
-            sel = block_phase == phase
+            layouts[phase] = (counts, offs, at - phase + 8)  # + time_from_start
+        first = pos + -pos % 4
+        layout = cls(path, names, stamp, m, np.frombuffer(body, dtype=np.uint8), first,
+                     layouts)
+        last = int(layout.starts(np.array([m - 1]))[0]) if m else 0
+        if m and last + layouts[last % 8][2] > len(body):
+            raise layout.bad("shorter than its points")
+        return layout
+
+    def starts(self, idx: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Byte offsets of points ``idx`` in the body."""
+        size = {ph: lay[2] for ph, lay in self.layouts.items()}
+        second = self.first + size[self.first % 8]
+        cycle = [second % 8]
+        if (second + size[cycle[0]]) % 8 != cycle[0]:
+            cycle.append((second + size[cycle[0]]) % 8)
+        period = sum(size[ph] for ph in cycle)
+        within = np.array([0, size[cycle[0]]], dtype=np.int64)[: len(cycle)]
+        k = np.maximum(idx - 1, 0)
+        out: NDArray[np.int64] = np.where(
+            idx == 0, self.first, second + (k // len(cycle)) * period + within[k % len(cycle)])
+        return out
+
+    def points(self, idx: NDArray[np.int64]) -> tuple[Array, Array, Array, Array]:
+        """``(t, q, qd, qdd)`` of points ``idx``, every sequence length checked."""
+        w = len(self.names)
+        base_all = self.starts(idx)
+        t, out = np.empty(idx.size), [np.empty((idx.size, w)) for _ in range(3)]
+        lane = np.arange(8 * w)
+        for phase, (count_offs, offs, size) in self.layouts.items():
+            sel = base_all % 8 == phase
             if not np.any(sel):
                 continue
-            base = block[sel]
+            base = base_all[sel]
+            u8 = self.body
             for c in count_offs:
                 got = u8[base[:, None] + c + np.arange(4)].copy().view("<u4")[:, 0]
                 want = 0 if c == count_offs[-1] else w
                 if np.any(got != want):
-                    raise bad("a point's sequence length differs from its joint names")
+                    raise self.bad("a point's sequence length differs from its joint names")
             for arr, off in zip(out, offs, strict=True):
-                arr[a: a + 65536][sel] = u8[base[:, None] + off + lane].copy().view("<f8")
-            ts = u8[base[:, None] + size + np.arange(8)].copy().view("<u4")
-            t[a: a + 65536][sel] = ts[:, 0].astype(np.int32) + ts[:, 1] * 1e-9
-    return names, stamp, t, out[0], out[1], out[2]
+                arr[sel] = u8[base[:, None] + off + lane].copy().view("<f8")
+            t[sel] = self._times(base, size)
+        return t, out[0], out[1], out[2]
+
+    def _times(self, base: NDArray[np.int64], size: int | NDArray[np.int64]) -> Array:
+        ts = self.body[base[:, None] + size - 8 + np.arange(8)].copy().view("<u4")
+        out: Array = ts[:, 0].astype(np.int32) + ts[:, 1] * 1e-9
+        return out
+
+    def times(self, idx: NDArray[np.int64]) -> Array:
+        """time_from_start of points ``idx`` [s]."""
+        base = self.starts(idx)
+        size = np.where(base % 8 == 0, self.layouts[0][2], self.layouts[4][2])
+        return self._times(base, size[:, None])
+
+
+def _bad_trajectory(path: Path, what: str) -> InputError:
+    return InputError(f"{path}: {TOPIC_TRAJECTORY} is not a joint trajectory camtraj reads "
+                      f"({what})")
 
 
 def describe(path: str | Path) -> dict[str, Any]:

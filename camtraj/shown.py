@@ -9,9 +9,13 @@ speed rounds down (a speed said to fit does fit).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["percent", "seconds", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "edge_use", "percent", "seconds", "speed_percent"]
+
+#: What the "ends" columns show of the run-up and the run-out.
+EDGE_QUANTITIES = ("acceleration", "jerk")
 
 
 def percent(x: float) -> str:
@@ -32,3 +36,18 @@ def seconds(x: float, digits: int = 2) -> str:
 def speed_percent(x: float) -> str:
     """The maximum feasible speed as % of real time, rounded down: '206%'."""
     return f"{math.floor(100.0 * x)}%"
+
+
+def edge_use(runup: Mapping[str, Mapping[str, float]], runout: Mapping[str, Mapping[str, float]],
+             names: Iterable[str]) -> dict[str, dict[str, float]]:
+    """Per axis, the run-up's and the run-out's peak acceleration and jerk use (the larger of
+    the two), apart from the shot's: the "ends" columns of the terminal and the report.
+
+    ``runup`` and ``runout`` map axis -> quantity -> fraction of the limit (a missing one: 0).
+    """
+    out = {}
+    for name in names:
+        parts = [side.get(name, {}) for side in (runup, runout)]
+        out[name] = {q: max((float(p.get(q, 0.0)) for p in parts), default=0.0)
+                     for q in EDGE_QUANTITIES}
+    return out

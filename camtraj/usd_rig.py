@@ -17,8 +17,10 @@ Fixed edges carry one ``xformOp:transform``; each moving joint carries one anima
 converted film frame's time code, from the solved joints. So the camera's world pose at a time
 code is the forward kinematics of the solution at that frame, placed and converted to the
 stage's units and up axis. ``camtraj_camera`` carries the shot's lens (focal length, apertures,
-clipping range, f-stop, focus distance), animated where the shot's lens is; with a lens file,
-the focal length, focus distance and f-stop the lens's motors give instead.
+lens shift, clipping range, f-stop, focus distance), animated where the shot's lens is; with a
+lens file, the focal length, focus distance and f-stop the lens's motors give instead. The
+lens shift (``horizontalApertureOffset``/``verticalApertureOffset``, authored only when the
+shot has one) is the principal point offset the MCAP's CameraInfo carries.
 
 The solids are the URDF's visuals (:func:`camtraj.urdf.robot_solids`): UsdGeom.Cube (size 1,
 scaled) and UsdGeom.Cylinder (axis z) with a display colour. The camera body and lens sit on
@@ -152,6 +154,12 @@ def _author_lens(camera: Any, shot: Shot, lens: dict[str, Array] | None = None) 
     _set_channel(camera.CreateFocalLengthAttr(), focal * tenths, tc)
     _set_channel(camera.CreateHorizontalApertureAttr(), shot.horizontal_aperture_mm * tenths, tc)
     _set_channel(camera.CreateVerticalApertureAttr(), shot.vertical_aperture_mm * tenths, tc)
+    for offset, create in ((shot.horizontal_aperture_offset_mm,
+                            camera.CreateHorizontalApertureOffsetAttr),
+                           (shot.vertical_aperture_offset_mm,
+                            camera.CreateVerticalApertureOffsetAttr)):
+        if offset is not None and np.any(offset != 0.0):
+            _set_channel(create(), offset * tenths, tc)
     _set_channel(camera.CreateClippingRangeAttr(), shot.clipping_range_m * per_m, tc)
     _set_channel(camera.CreateFStopAttr(), lens.get("f_stop", shot.f_stop), tc)
     _set_channel(camera.CreateFocusDistanceAttr(), focus * per_m, tc)

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
 import numpy as np
 import pytest
 from numpy.typing import NDArray
 
 from camtraj.robot import Robot
+from camtraj.timing import Limits
+
+_ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session")
@@ -60,3 +70,90 @@ def pose_error(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[float, f
                      rel[:, 1, 0] - rel[:, 0, 1]], axis=1)
     ang = np.arctan2(np.linalg.norm(skew, axis=1) / 2.0, cos)
     return dp, float(ang.max())
+
+
+# The bad-input corpora (tests/test_hardening*.py) run many command lines. Each runs in a new
+# process forked from a server that imported the pipeline once: the real command line
+# (camtraj.__main__.run) with its own folder, stdout and stderr files, in its own process
+# group (a batch's workers are killed with it), with an optional file size limit ("fsize",
+# a disk that fills up) and alarm ("alarm" seconds: a run still going is killed by SIGALRM,
+# exit code -14, a hang).
+_FORK_SERVER = r"""
+import json, os, resource, signal, sys, traceback
+import camtraj.cli, camtraj.convert, camtraj.place, camtraj.farm, camtraj.report
+from camtraj.__main__ import run
+
+for line in sys.stdin:
+    job = json.loads(line)
+    sys.stdout.flush()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.setpgid(0, 0)
+            os.chdir(job["cwd"])
+            null = os.open(os.devnull, os.O_RDONLY)
+            out = os.open(job["stdout"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            err = os.open(job["stderr"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            os.dup2(null, 0); os.dup2(out, 1); os.dup2(err, 2)
+            if job.get("fsize"):
+                resource.setrlimit(resource.RLIMIT_FSIZE, (job["fsize"], job["fsize"]))
+            if job.get("alarm"):
+                signal.signal(signal.SIGALRM, signal.SIG_DFL)
+                signal.alarm(job["alarm"])
+            sys.argv = ["camtraj", *job["args"]]
+            run()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        except BaseException:
+            traceback.print_exc()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except BaseException:
+                pass
+        os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    try:
+        os.killpg(pid, signal.SIGKILL)  # a batch's workers, if the run was killed
+    except OSError:
+        pass
+    print(json.dumps({"id": job["id"], "rc": os.waitstatus_to_exitcode(status)}), flush=True)
+"""
+
+
+def run_forked(jobs: list[dict[str, object]], timeout: float) -> dict[str, int]:
+    """Run every job's command line in a forked process (two servers, alternate jobs each);
+    returns the exit code by job id (``-N``: killed by signal N).
+
+    Each job: ``id``, ``cwd``, ``args`` (after ``camtraj``), ``stdout`` and ``stderr`` (file
+    paths), optional ``fsize`` [bytes] and ``alarm`` [s].
+    """
+    def serve(part: list[dict[str, object]]) -> dict[str, int]:
+        env = {**os.environ, "PYTHONPATH": str(_ROOT)}
+        proc = subprocess.run(
+            [sys.executable, "-c", _FORK_SERVER],
+            input="".join(json.dumps(j) + "\n" for j in part),
+            capture_output=True, text=True, env=env, timeout=timeout, check=False,
+        )
+        assert proc.returncode == 0, proc.stderr
+        return {r["id"]: r["rc"] for r in map(json.loads, proc.stdout.splitlines())}
+
+    codes: dict[str, int] = {}
+    with ThreadPoolExecutor(2) as pool:
+        for part in pool.map(serve, [jobs[0::2], jobs[1::2]]):
+            codes.update(part)
+    return codes
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every regular file under ``folder`` (symlinks not followed): relative path -> bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if not p.is_symlink() and p.is_file()}
+
+
+@pytest.fixture(scope="session")
+def limits(robot: Robot) -> Limits:
+    """The default robot's limits as the timing stage reads them."""
+    return Limits.from_robot(robot)

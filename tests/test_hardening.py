@@ -29,55 +29,18 @@ import stat
 import subprocess
 import sys
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom
 
+from tests.conftest import run_forked, snapshot
 from tests.test_convert import ROOT, SHOTS, run_cli
 
 MAYA = SHOTS / "maya_dolly_push_in.usda"
 ROBOT_TOML = ROOT / "camtraj" / "data" / "robot.toml"
 MIN_CASES = 150
-
-SERVER = r"""
-import json, os, resource, sys, traceback
-import camtraj.cli, camtraj.convert  # import the pipeline (numpy, scipy, USD) once
-from camtraj.__main__ import run
-
-for line in sys.stdin:
-    job = json.loads(line)
-    sys.stdout.flush()
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            os.chdir(job["cwd"])
-            null = os.open(os.devnull, os.O_RDONLY)
-            out = os.open(job["stdout"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-            err = os.open(job["stderr"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-            os.dup2(null, 0); os.dup2(out, 1); os.dup2(err, 2)
-            if job.get("fsize"):
-                resource.setrlimit(resource.RLIMIT_FSIZE, (job["fsize"], job["fsize"]))
-            sys.argv = ["camtraj", *job["args"]]
-            run()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        except BaseException:
-            traceback.print_exc()
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except BaseException:
-                pass
-        os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    print(json.dumps({"id": job["id"], "rc": os.waitstatus_to_exitcode(status)}), flush=True)
-"""
-
 
 @dataclass
 class Case:
@@ -460,25 +423,6 @@ class Result:
     before: dict[str, bytes]
 
 
-def _snapshot(folder: Path) -> dict[str, bytes]:
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        if p.is_symlink() or not p.is_file():
-            continue
-        out[str(p.relative_to(folder))] = p.read_bytes()
-    return out
-
-
-def _serve(jobs: list[dict[str, object]]) -> dict[str, int]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run(
-        [sys.executable, "-c", SERVER], input="".join(json.dumps(j) + "\n" for j in jobs),
-        capture_output=True, text=True, env=env, timeout=1800, check=False,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return {r["id"]: r["rc"] for r in map(json.loads, proc.stdout.splitlines())}
-
-
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
     base = tmp_path_factory.mktemp("corpus")
@@ -502,14 +446,10 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
         jobs.append({"id": name, "cwd": str(folder), "args": case.args,
                      "stdout": case.stdout or str(base / f"{name}.stdout"),
                      "stderr": str(base / f"{name}.stderr"), "fsize": case.fsize})
-    before_inputs = _snapshot(inputs)
+    before_inputs = snapshot(inputs)
     devices = {d: os.stat(d) for d in ("/dev/null", "/dev/full")}
-    half = [jobs[0::2], jobs[1::2]]
-    with ThreadPoolExecutor(2) as pool:
-        codes: dict[str, int] = {}
-        for part in pool.map(_serve, half):
-            codes.update(part)
-    assert _snapshot(inputs) == before_inputs, "an input changed"
+    codes = run_forked(jobs, timeout=1800)
+    assert snapshot(inputs) == before_inputs, "an input changed"
     for device, st in devices.items():  # never replaced by a regular file (we may be root)
         now = os.stat(device)
         assert stat.S_ISCHR(now.st_mode) and now.st_rdev == st.st_rdev, device
@@ -625,3 +565,16 @@ def test_output_names_that_are_not_utf8_are_written_and_reported(tmp_path: Path)
     assert "wrote " in proc.stdout and "take\\udcff.mcap" in proc.stdout
     assert os.path.getsize(out) > 0
     assert json.loads(Path(summary).read_text())["status"] == "ok"
+
+
+def test_the_readme_states_the_frame_and_rate_caps_the_code_enforces() -> None:
+    """Issue 14 §5: the README said at most 1,000,000 frames while the code refused above
+    100,000; the README's numbers are read here and compared with the code's."""
+    from camtraj.convert import MAX_FPS
+    from camtraj.usd_shot import MAX_FRAMES
+
+    text = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    found = re.search(r"at most \*\*([\d,]+) frames\*\* and at most \*\*([\d,]+) fps\*\*", text)
+    assert found, "the README no longer states the frame and rate caps"
+    assert int(found[1].replace(",", "")) == MAX_FRAMES
+    assert float(found[2].replace(",", "")) == MAX_FPS

@@ -2,7 +2,7 @@
 export and run-task, set files, collision geometry and MCAP metadata.
 
 Every case runs the real command line in a fresh process (forked from a pre-imported server,
-as in :mod:`tests.test_hardening`), in its own folder that holds an earlier good result, and
+:func:`tests.conftest.run_forked`), in its own folder that holds an earlier good result, and
 must:
 
 * exit with the documented code (2 bad input, 3 cannot be done) within a time limit (a run
@@ -20,10 +20,7 @@ import math
 import os
 import re
 import shutil
-import subprocess
-import sys
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,53 +30,12 @@ from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 import camtraj
 from camtraj.farm import MANIFEST_FORMAT
+from tests.conftest import run_forked, snapshot
 from tests.test_convert import ROOT, SHOTS, run_cli
 
 MAYA = SHOTS / "maya_dolly_push_in.usda"
 ROBOT_TOML = ROOT / "camtraj" / "data" / "robot.toml"
 ALARM_S = 240  # a case still running after this long is a hang
-
-SERVER = r"""
-import json, os, signal, sys, traceback
-import camtraj.cli, camtraj.convert, camtraj.place, camtraj.farm, camtraj.report
-from camtraj.__main__ import run
-
-for line in sys.stdin:
-    job = json.loads(line)
-    sys.stdout.flush()
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            os.setpgid(0, 0)
-            os.chdir(job["cwd"])
-            null = os.open(os.devnull, os.O_RDONLY)
-            out = os.open(job["stdout"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-            err = os.open(job["stderr"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-            os.dup2(null, 0); os.dup2(out, 1); os.dup2(err, 2)
-            signal.signal(signal.SIGALRM, signal.SIG_DFL)
-            signal.alarm(job["alarm"])
-            sys.argv = ["camtraj", *job["args"]]
-            run()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        except BaseException:
-            traceback.print_exc()
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except BaseException:
-                pass
-        os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    try:
-        os.killpg(pid, signal.SIGKILL)  # a batch's workers, if the run was killed
-    except OSError:
-        pass
-    print(json.dumps({"id": job["id"], "rc": os.waitstatus_to_exitcode(status)}), flush=True)
-"""
-
 
 @dataclass
 class Case:
@@ -412,21 +368,6 @@ class Result:
     before: dict[str, bytes]
 
 
-def _snapshot(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if not p.is_symlink() and p.is_file()}
-
-
-def _serve(jobs: list[dict[str, object]]) -> dict[str, int]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run(
-        [sys.executable, "-c", SERVER], input="".join(json.dumps(j) + "\n" for j in jobs),
-        capture_output=True, text=True, env=env, timeout=3600, check=False,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return {r["id"]: r["rc"] for r in map(json.loads, proc.stdout.splitlines())}
-
-
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
     base = tmp_path_factory.mktemp("commands")
@@ -454,12 +395,9 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Result]:
         jobs.append({"id": name, "cwd": str(folder), "args": case.args, "alarm": ALARM_S,
                      "stdout": str(base / f"{name}.stdout"),
                      "stderr": str(base / f"{name}.stderr")})
-    before_inputs = _snapshot(inputs)
-    with ThreadPoolExecutor(2) as pool:
-        codes: dict[str, int] = {}
-        for part in pool.map(_serve, [jobs[0::2], jobs[1::2]]):
-            codes.update(part)
-    after_inputs = _snapshot(inputs)
+    before_inputs = snapshot(inputs)
+    codes = run_forked(jobs, timeout=3600)
+    after_inputs = snapshot(inputs)
     changed = sorted(k for k in {*before_inputs, *after_inputs}
                      if before_inputs.get(k) != after_inputs.get(k))
     (base / "inputs_changed.json").write_text(json.dumps(changed))
@@ -570,3 +508,26 @@ def test_an_instanceable_reference_is_checked_at_each_instance(tmp_path: Path) -
     stage.GetRootLayer().Save()
     obstacles = read_obstacles(path, ("/World/*",), [1.0])
     assert sorted(float(o.poses[0, 0, 3]) for o in obstacles) == [0.0, 7.0]
+
+
+def test_a_newline_in_a_file_name_keeps_every_error_one_line(tmp_path: Path) -> None:
+    """Every command's error names the file with its newline escaped (``\\n``), on one line."""
+    from tests.test_convert import error_line, run_all
+
+    shot = tmp_path / "shot\nname.usda"
+    shutil.copy(MAYA, shot)
+    (tmp_path / "robot\nfile.toml").write_text("[robot]\nname = 3\n", encoding="utf-8")
+    gone = tmp_path / "gone\nshot.usda"
+    runs = run_all({
+        "convert": ["convert", gone, "-o", tmp_path / "a.mcap"],
+        "check_robot": ["check", shot, "--robot", tmp_path / "robot\nfile.toml"],
+        "place": ["place", gone],
+        "report": ["report", tmp_path / "take\n.mcap", "-o", tmp_path / "r.html"],
+        "info": ["info", tmp_path / "take\n.mcap"],
+        "run_task": ["farm", "run-task", tmp_path / "job\n.json", 1],
+        "batch": ["batch", gone, "-o", tmp_path / "out"],
+    })
+    for name, proc in runs.items():
+        assert proc.returncode == 2, (name, proc.stderr)
+        line = error_line(proc)
+        assert re.search(r"(gone|robot|take|job)\\n", line), (name, line)

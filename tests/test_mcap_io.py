@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import math
 import os
+import re
 import time
+import tracemalloc
 from pathlib import Path
 from typing import IO, Any
 
@@ -455,6 +458,62 @@ def test_two_writes_are_byte_identical(tmp_path: Path, take: TakeData) -> None:
     assert a.read_bytes() == b.read_bytes()
 
 
+def _file_order(data: bytes) -> list[tuple[int, str, int]]:
+    """(log time, topic, sequence) of every message, in the order the file stores them."""
+    reader = make_reader(io.BytesIO(data))
+    return [(m.log_time, c.topic, m.sequence)
+            for _s, c, m in reader.iter_messages(log_time_order=False)]
+
+
+def test_the_writing_window_does_not_change_the_bytes(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The writer encodes a window of servo samples at a time: any window, the same file.
+
+    Film frames at 24 fps on a 240 Hz servo grid starting at t = 0 log at the same times as
+    servo samples (and as the t = 0 messages), so same-time messages straddle window bounds.
+    """
+    take = make_take(m=241, n=24, rate=240.0, first_frame_time=0.0)
+    files = []
+    for window in (1, 7, 10, 4096):
+        monkeypatch.setattr(mcap_io, "_WINDOW", window)
+        stream = io.BytesIO()
+        mcap_io.write_take_to(stream, take, ROBOT, METADATA)
+        files.append(stream.getvalue())
+    assert all(f == files[0] for f in files[1:])
+    order = _file_order(files[0])
+    rank = {topic: i for i, topic in enumerate(TOPICS)}
+    assert order == sorted(order, key=lambda o: (o[0], rank[o[1]], o[2]))
+    at_zero = [topic for t, topic, _seq in order if t == 0]
+    assert at_zero == list(TOPICS)  # every topic has a message at t = 0, in topic order
+    assert sum(1 for _t, topic, _s in order if topic == "/joint_states") == 241
+
+
+def _writer_peak(path: Path, take: TakeData) -> tuple[int, int]:
+    """tracemalloc's peak [bytes] while writing ``take`` to ``path``, and the size of its
+    /joint_trajectory message read back from the file."""
+    tracemalloc.start()
+    try:
+        with path.open("wb") as stream:
+            mcap_io.write_take_to(stream, take, ROBOT, METADATA)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        sizes = [len(m.data) for _s, _c, m in reader.iter_messages(topics=["/joint_trajectory"])]
+    return peak, sizes[0]
+
+
+def test_writer_memory_grows_only_with_the_trajectory_message(tmp_path: Path) -> None:
+    """The /joint_trajectory message holds every servo sample (one message at t = 0), and the
+    MCAP writer copies it while it compresses its chunk; every other message is written a
+    window at a time. So the writer's peak grows per servo sample by about four copies of a
+    trajectory point (issue 14 §5: the writer that held every message grew by twelve)."""
+    small, big = (_writer_peak(tmp_path / f"{m}.mcap", make_take(m=m, n=m // 11))
+                  for m in (10_000, 30_000))
+    growth = (big[0] - small[0]) / (big[1] - small[1])
+    assert 1.0 < growth < 4.5, growth
+
+
 def _leftovers(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if ".tmp-" in p.name)
 
@@ -727,3 +786,22 @@ def test_data_end_crc_and_summary_offsets(written: Path) -> None:
     damaged[len(data.split(b"camtraj", 1)[0])] ^= 0x20  # "camtraj" -> "Camtraj"
     with pytest.raises(CRCValidationError):
         list(StreamReader(io.BytesIO(bytes(damaged)), validate_crcs=True).records)
+
+
+@pytest.mark.parametrize(("drop", "words"), [
+    ("/tf_static", "/tf_static has 0 messages, expected 1"),
+    ("/joint_trajectory", "/joint_trajectory has 0 messages, expected 1"),
+    ("/joint_states", "/joint_states has no messages"),
+])
+def test_both_readers_refuse_a_take_without_its_messages(
+    tmp_path: Path, written: Path, drop: str, words: str
+) -> None:
+    """read_take (every message decoded) and read_take_for_report (the summary's counts)
+    check the same counts and say the same thing."""
+    from tests.test_hardening_commands import _rewrite_mcap
+
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(written, bad, drop=drop)
+    for reader in (read_take, mcap_io.read_take_for_report):
+        with pytest.raises(InputError, match=re.escape(words)):
+            reader(bad)

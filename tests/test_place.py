@@ -72,7 +72,7 @@ def far(tmp_path_factory: pytest.TempPathFactory, robot: Robot) -> dict[str, Any
     shot = write_shot(d / "far.usda", move)
     set_file = d / "region.toml"
     set_file.write_text(region_toml("Z", 1.0))
-    placed = d / "placed.toml"
+    placed = d / "new" / "placed.toml"  # a folder -o makes, as every command does
     proc = run("place", shot, "--set-file", set_file, "-o", placed, "--json", "-j", "2")
     assert proc.returncode == 0, proc.stderr
     return {"dir": d, "move": move, "shot": shot, "set": set_file, "placed": placed,
@@ -99,6 +99,11 @@ def brute_force_speed(shot: Path, x: float, y: float, yaw: float) -> float:
         return 0.0
     assert a.take is not None
     return float(a.take.report.max_speed) if not a.take.report.limiting else 0.0
+
+
+def test_place_o_makes_its_missing_folder(far: dict[str, Any]) -> None:
+    assert far["placed"].parent.name == "new" and far["placed"].is_file()
+    assert "[placement]" in far["placed"].read_text(encoding="utf-8")
 
 
 def test_found_placement_is_among_the_best_of_a_brute_force_grid(far: dict[str, Any]) -> None:

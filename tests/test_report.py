@@ -30,7 +30,7 @@ from camtraj import report as rp
 from camtraj.convert import analyse
 from camtraj.errors import InputError
 from camtraj.options import build_options
-from camtraj.report.plots import envelope
+from camtraj.report.samples import in_blocks
 from camtraj.robot import JOINT_NAMES, Robot
 from tests.test_convert import ROOT, SHOTS, error_line, leftovers, run_all, run_cli, usd_camera
 
@@ -193,7 +193,8 @@ def test_both_sources_render_the_same_report(runs: Runs) -> None:
     assert summary_rows.findall(conv) == summary_rows.findall(rep)
     cells = re.compile(r"<td class='num[^']*'>([^<]+)</td>")
     a, b = cells.findall(conv), cells.findall(rep)
-    assert len(a) == len(b) == 8 * (6 + 2)  # margins table, then nearest position limits
+    # margins table (shot use, run-up/run-out use, extents), then nearest position limits
+    assert len(a) == len(b) == 8 * (8 + 2)
     for x, y in zip(a, b, strict=True):
         if x.endswith("%"):  # jerk: exact in memory, by differences from the file
             assert abs(int(x[:-1]) - int(y[:-1])) <= 1, (x, y)
@@ -208,14 +209,21 @@ def test_report_from_the_file_matches_the_run(runs: Runs, robot: Robot) -> None:
     analysis = analyse(MAYA, options)
     mem = rp.from_analysis(analysis, MAYA, options)
     disk = rp.report_from_mcap(runs.folder / "maya.mcap")
-    np.testing.assert_allclose(disk.t, mem.t, atol=1e-9)
-    np.testing.assert_allclose(disk.q, mem.q, atol=1e-12)
-    np.testing.assert_allclose(disk.qdd, mem.qdd, atol=1e-9)
+    ds, ms = disk.samples, mem.samples
+    assert ds is not None and ms is not None
+    assert ds.count == ms.count and abs(ds.start - ms.start) + abs(ds.end - ms.end) < 1e-9
+    # every frame's peak use of position, velocity and acceleration, and the plotted curves
+    np.testing.assert_allclose(ds.frame_peak[:3], ms.frame_peak[:3], atol=1e-9)
+    for key, (_te, ye) in ms.curves.items():  # (sample times in ns in the file: a sample on
+        if key[0] != "jerk":                    # a column's edge may fall on either side)
+            got = ds.curves[key][1]
+            np.testing.assert_allclose([got.min(), got.max()], [ye.min(), ye.max()], atol=1e-9)
     # jerk by differences against the exact jerk: close over the shot (a smooth spline),
     # and never above the true peak (ruckig's run-up and run-out switch jerk within a step)
-    shot = mem.shot_mask()
-    assert np.max(np.abs(disk.qddd - mem.qddd)[shot] / mem.jerk) < 0.02
-    assert np.all(np.abs(disk.qddd).max(axis=0) <= np.abs(mem.qddd).max(axis=0) * (1 + 1e-6))
+    inner = slice(1, -1)  # frames whose samples are all the shot's
+    assert np.max(np.abs(ds.frame_peak[3, inner] - ms.frame_peak[3, inner])) < 0.02
+    assert np.all(ds.frame_peak[3].max(axis=0) <= ms.frame_peak[3].max(axis=0) * (1 + 1e-6))
+    assert disk.edges == mem.edges  # the run-up's and run-out's use, recorded in the file
     np.testing.assert_array_equal(disk.frame_numbers, usd_camera(MAYA).frames)
     np.testing.assert_allclose(disk.poses, mem.poses, atol=1e-9)  # /tf chain == FK
     np.testing.assert_allclose(disk.track, mem.track, atol=1e-9)
@@ -379,32 +387,21 @@ def test_chromium_shows_the_violation_in_red(runs: Runs) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def test_envelope_keeps_every_column_extreme() -> None:
-    rng = np.random.default_rng(0)
-    t = np.sort(rng.uniform(0.0, 60.0, 15000))
-    y = np.cumsum(rng.normal(size=t.size))
-    te, ye = envelope(t, y, columns=100)
-    assert te.size <= 200 and np.all(np.diff(te) >= 0)
-    keep = np.searchsorted(t, te)
-    np.testing.assert_array_equal(t[keep], te)
-    np.testing.assert_array_equal(y[keep], ye)  # real samples, in order
-    col = np.minimum((t - t[0]) / (t[-1] - t[0]) * 100, 99).astype(int)
-    col_e = np.minimum((te - t[0]) / (t[-1] - t[0]) * 100, 99).astype(int)
-    for c in range(100):
-        assert y[col == c].max() in ye[col_e == c]
-        assert y[col == c].min() in ye[col_e == c]
-
-
 def test_a_one_minute_take_renders_under_1_5_mb(runs: Runs) -> None:
     """15 000 servo samples (a minute at 250 Hz) of a busy move: the envelope keeps it small."""
     base = rp.report_from_mcap(runs.folder / "maya.mcap")
     t = np.linspace(0.0, 60.0, 15000)
     wiggle = np.sin(t[:, None] * np.arange(1, 9)[None, :] * 3.1)
+    frame_times = np.arange(1440) / 24.0 + 0.5
+    samples = rp.reduce_samples(
+        in_blocks(t, 0.5 * (base.lower + base.upper) + 0.4 * wiggle * (base.upper - base.lower),
+                  0.9 * wiggle * base.velocity, 0.9 * wiggle * base.acceleration,
+                  0.9 * np.cos(t[:, None] * 7.0) * base.jerk),
+        count=t.size, start=0.0, end=60.0, frame_times=frame_times,
+        shot=(0.5, 0.5 + 1439 / 24.0), lower=base.lower, upper=base.upper,
+        limits=(base.velocity, base.acceleration, base.jerk))
     long = dataclasses.replace(
-        base, t=t, q=0.5 * (base.lower + base.upper) + 0.4 * wiggle * (base.upper - base.lower),
-        qd=0.9 * wiggle * base.velocity, qdd=0.9 * wiggle * base.acceleration,
-        qddd=0.9 * np.cos(t[:, None] * 7.0) * base.jerk,
-        frame_numbers=np.arange(1, 1441), frame_times=np.arange(1440) / 24.0 + 0.5,
+        base, samples=samples, frame_numbers=np.arange(1, 1441), frame_times=frame_times,
         shot_start=0.5, shot_end=0.5 + 1439 / 24.0, violations=())
     page = rp.render_html(long)
     assert len(page.encode()) < 1.5e6
@@ -556,8 +553,8 @@ def test_the_track_bar_spans_the_track_limits(robot: Robot) -> None:
     constant offset from the track value (FK at both limits)."""
     q = np.radians([0.0, 30.0, 10.0, 0.0, -40.0, 10.0, 5.0, 0.0])
     q[0], q[3] = 3.0, 0.5
-    ends = rp.data.track_ends(robot.link_frames(q[None])[0], float(q[0]),
-                              float(robot.lower[0]), float(robot.upper[0]))
+    ends = rp.data.track_ends(robot.link_frames(q[None])[0], float(robot.lower[0]),
+                              float(robot.upper[0]))
     offset = robot.link_frames(np.zeros((1, 8)))[0, 1, :3, 3]  # carriage at track value 0
     for k, limit in enumerate((robot.lower[0], robot.upper[0])):
         at = q.copy()
@@ -575,10 +572,10 @@ def test_report_and_terminal_print_the_same_numbers(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     page = html.read_text(encoding="utf-8")
     out = proc.stdout
-    table = {ln.split()[0]: ln.split()[1:5] for ln in out.splitlines()
+    table = {ln.split()[0]: ln.split()[1:7] for ln in out.splitlines()
              if ln.split() and ln.split()[0] in JOINT_NAMES}
     cells = re.findall(r"<td><a href='#axis-(\w+)'>\w+</a></td>((?:<td class='num[^']*'>"
-                       r"[^<]+</td>){4})", page)
+                       r"[^<]+</td>){6})", page)
     assert len(cells) == 8
     for axis, row in cells:
         assert re.findall(r">([^<]+)<", row) == table[axis], axis
@@ -596,3 +593,27 @@ def test_durations_and_use_round_one_way() -> None:
     assert seconds(0.0449999999) == seconds(0.0450000001) == "0.05"
     assert seconds(0.04) == "0.04" and seconds(5.165) == "5.17"
     assert percent(0.995) == "100%" and percent(0.994) == "99%" and percent(math.nan) == "-"
+
+
+def _ends_cells(page: str) -> dict[str, list[str]]:
+    rows = re.findall(r"<td><a href='#axis-(\w+)'>\w+</a></td>(.*?)</tr>", page)
+    return {axis: re.findall(r"<td class='num ends'>([^<]+)</td>", row) for axis, row in rows}
+
+
+def test_report_shows_the_run_up_and_run_out_use_the_terminal_prints(tmp_path: Path) -> None:
+    """Issue 15 §1: the run-up's and run-out's peak acceleration and jerk use, apart from the
+    shot's, in convert's table, convert --report's page and camtraj report's page of the file
+    (recorded in its metadata), the same text in all three."""
+    mcap, html, again = tmp_path / "d.mcap", tmp_path / "convert.html", tmp_path / "file.html"
+    proc = run_cli("convert", MAYA, "-o", mcap, "--report", html)
+    assert proc.returncode == 0, proc.stderr
+    assert run_cli("report", mcap, "-o", again).returncode == 0
+    header = next(ln for ln in proc.stdout.splitlines() if "ends: accel" in ln)
+    assert header.split()[5:8] == ["ends:", "accel", "jerk"]
+    terminal = {ln.split()[0]: ln.split()[5:7] for ln in proc.stdout.splitlines()
+                if ln.split() and ln.split()[0] in JOINT_NAMES}
+    assert set(terminal) == set(JOINT_NAMES)
+    assert any(v != "0%" for row in terminal.values() for v in row)  # something to compare
+    for page in (html.read_text(encoding="utf-8"), again.read_text(encoding="utf-8")):
+        assert "<th>run-up/run-out acceleration</th><th>run-up/run-out jerk</th>" in page
+        assert _ends_cells(page) == terminal

@@ -21,23 +21,11 @@ from numpy.typing import NDArray
 from camtraj.errors import LimitError
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
+from tests.timing_checks import FPS, HOME, SLACK, divided, frame_times
 
 Array = NDArray[np.float64]
-FPS = 24.0
 ROTATE = JOINT_NAMES.index("rotate")
 TRACK = JOINT_NAMES.index("track")
-SLACK = 1e-3  # the brief's numerical slack for limits checked by finite differences
-
-HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
-
-
-@pytest.fixture(scope="module")
-def limits() -> Limits:
-    return Limits.from_robot(Robot.default())
-
-
-def frame_times(n: int, fps: float = FPS) -> Array:
-    return np.arange(n) / fps
 
 
 def sinusoid(n: int, amp: Array, omega: float, phase: float = 0.0) -> tuple[Array, Array]:
@@ -61,14 +49,6 @@ def bump_path(n: int, k: float, vmax: float, t0: float, width: float) -> tuple[A
 def bump_velocity(t: Array, k: float, vmax: float, t0: float, width: float) -> Array:
     tau = np.clip(t - t0, 0.0, width)
     return k * vmax * np.sin(np.pi * tau / width) ** 2
-
-
-def divided(t: Array, y: Array, order: int) -> Array:
-    """``order! * f[t_i, ..., t_{i+order}]`` per column: the mean-value estimate of f^(order)."""
-    d = y.copy()
-    for level in range(1, order + 1):
-        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
-    return d * math.factorial(order)
 
 
 def assert_within_limits_by_differences(take: Take, limits: Limits, *, jerk: bool) -> None:

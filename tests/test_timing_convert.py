@@ -3,7 +3,6 @@ end in motion, and the servo stream read back from the written MCAP by the mcap 
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -15,12 +14,12 @@ from camtraj.convert import analyse, convert
 from camtraj.options import ConvertOptions
 from camtraj.robot import Robot
 from camtraj.timing import Limits
+from tests.timing_checks import SLACK, divided
 
 from .shot_set import make_samples
 
 Array = NDArray[np.float64]
 SHOTS = Path(__file__).resolve().parents[1] / "samples" / "shots"
-SLACK = 1e-3
 
 
 def write_track_move(path: Path, seconds: float, speed: float, tilt_rate: float) -> Path:
@@ -35,13 +34,6 @@ def write_track_move(path: Path, seconds: float, speed: float, tilt_rate: float)
     text = ms._header("track move in motion", "Z", 1.0, frames, 24.0, "World") + "\n" + body
     path.write_text(text + "\n", encoding="utf-8")
     return path
-
-
-def divided(t: Array, y: Array, order: int) -> Array:
-    d = y.copy()
-    for level in range(1, order + 1):
-        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
-    return d * math.factorial(order)
 
 
 @pytest.mark.parametrize(("seconds", "speed", "tilt_rate"), [(1.0, 0.4, 3.0), (2.0, 0.5, 4.0)])

@@ -23,25 +23,10 @@ from numpy.typing import NDArray
 from camtraj.robot import Robot
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
 from camtraj.timing.path import FramePath
+from tests.timing_checks import FPS, HOME, SLACK, divided
 
 Array = NDArray[np.float64]
-FPS = 24.0
-HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
 TRACK, ROTATE, LIFT, EXTEND, ELBOW, PAN, TILT, ROLL = range(8)
-SLACK = 1e-3
-
-
-@pytest.fixture(scope="module")
-def limits() -> Limits:
-    return Limits.from_robot(Robot.default())
-
-
-def divided(t: Array, y: Array, order: int) -> Array:
-    """``order! * f[t_i, ..., t_{i+order}]`` per column."""
-    d = y.copy()
-    for level in range(1, order + 1):
-        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
-    return d * math.factorial(order)
 
 
 def assert_take_inside(take: Take, limits: Limits) -> None:

@@ -15,8 +15,6 @@ Facts used:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from numpy.typing import NDArray
@@ -26,31 +24,16 @@ from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
 from camtraj.usd_shot import read_shot
 from tests.shot_set import SAMPLES, SHOTS
+from tests.timing_checks import FPS, HOME, divided, frame_times
 
 Array = NDArray[np.float64]
-FPS = 24.0
 TRACK = JOINT_NAMES.index("track")
 ROTATE = JOINT_NAMES.index("rotate")
-HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
 #: Analytic values may exceed a limit by float round-off only.
 RTOL = 1e-9
 #: Divided differences of the sampled positions may exceed a limit by this fraction (round-off
 #: of third differences; see the module docstring).
 DIFF_RTOL = 1e-6
-
-
-@pytest.fixture(scope="module")
-def robot() -> Robot:
-    return Robot.default()
-
-
-@pytest.fixture(scope="module")
-def limits(robot: Robot) -> Limits:
-    return Limits.from_robot(robot)
-
-
-def frame_times(n: int, fps: float = FPS) -> Array:
-    return np.arange(n) / fps
 
 
 def _synthetic() -> dict[str, tuple[Array, float]]:
@@ -116,14 +99,6 @@ def takes(
 
 
 NAMES = [*SAMPLES, *SYNTHETIC]
-
-
-def divided(t: Array, y: Array, order: int) -> Array:
-    """``order! * y[t_i, ..., t_{i+order}]`` per column."""
-    d = y.copy()
-    for level in range(1, order + 1):
-        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
-    return d * math.factorial(order)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -19,29 +19,15 @@ import pytest
 from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 
-from camtraj.robot import JOINT_NAMES, Robot
+from camtraj.robot import JOINT_NAMES
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
 from camtraj.timing.path import FramePath
 from camtraj.timing.quintic import hermite_coefficients, solve_knot_derivatives
+from tests.timing_checks import FPS, HOME, SLACK, divided
 
 Array = NDArray[np.float64]
-FPS = 24.0
-HOME = np.array([5.0, 0.0, 0.0, 0.7, -1.5, 0.0, 0.0, 0.0])
 TRACK, LIFT, EXTEND, ELBOW, TILT = (JOINT_NAMES.index(a) for a in
                                     ("track", "lift", "extend", "elbow", "tilt"))
-SLACK = 1e-3
-
-
-@pytest.fixture(scope="module")
-def limits() -> Limits:
-    return Limits.from_robot(Robot.default())
-
-
-def divided(t: Array, y: Array, order: int) -> Array:
-    d = y.copy()
-    for level in range(1, order + 1):
-        d = (d[1:] - d[:-1]) / (t[level:] - t[:-level])[:, None]
-    return d * math.factorial(order)
 
 
 def assert_inside_by_differences(take: Take, limits: Limits) -> None:

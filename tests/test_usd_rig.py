@@ -296,3 +296,53 @@ def test_bad_rig_paths_fail_before_work_and_keep_old_files(
     with pytest.raises(InputError, match="it is the shot"):
         convert(c.shot, tmp_path / "x.mcap", OPTIONS, rig_layer=c.shot)
     assert c.shot.read_bytes() == before
+
+
+@pytest.mark.parametrize("key", list(CASES))
+def test_rig_camera_carries_the_lens_shift_camera_info_carries(
+    tmp_path: Path, robot: Robot, key: str
+) -> None:
+    """Issue 15 §4: a shot with a lens shift (constant across, animated up-down): the rig
+    layer, read back alone with pxr, has the shot's apertureOffsets at every frame, and they
+    give the principal point the MCAP's CameraInfo holds."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from camtraj.mcap_io import TOPIC_CAMERA_INFO
+
+    up, mpu, fps = CASES[key]
+    shot = tmp_path / "shift.usda"
+    write_shot(shot, robot, up, mpu, fps)
+    stage = Usd.Stage.Open(str(shot))
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/shotCam"))
+    tenths = 1.0 / (mpu * 100.0)
+    ox_mm, oy_mm = 2.5, 1.2 * np.sin(np.arange(N_FRAMES))  # oy: film shake
+    cam.CreateHorizontalApertureOffsetAttr(ox_mm * tenths)
+    attr = cam.CreateVerticalApertureOffsetAttr()
+    for i in range(N_FRAMES):
+        attr.Set(float(oy_mm[i] * tenths), Usd.TimeCode(FIRST_FRAME + i))
+    stage.GetRootLayer().Save()
+    rig, mcap = tmp_path / "shift.rig.usda", tmp_path / "shift.mcap"
+    convert(shot, mcap, OPTIONS, rig_layer=rig)
+
+    alone = Usd.Stage.Open(str(rig))
+    got = UsdGeom.Camera(alone.GetPrimAtPath(find_prim(alone, CAMERA_NAME)))
+    assert got.GetHorizontalApertureOffsetAttr().GetNumTimeSamples() == 0  # constant
+    assert got.GetVerticalApertureOffsetAttr().GetNumTimeSamples() == N_FRAMES
+    with mcap.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        infos = [m for _s, _c, _m, m in reader.iter_decoded_messages(
+            topics=[TOPIC_CAMERA_INFO])]
+    assert len(infos) == N_FRAMES
+    for i, info in enumerate(infos):
+        tc = Usd.TimeCode(FIRST_FRAME + i)
+        gf = got.GetCamera(tc)
+        want = cam.GetCamera(tc)
+        assert gf.horizontalApertureOffset == pytest.approx(ox_mm * tenths, rel=1e-6)
+        assert gf.verticalApertureOffset == pytest.approx(want.verticalApertureOffset,
+                                                          rel=1e-6, abs=1e-9)
+        # CameraInfo's principal point from the rig camera's own lens, in millimetres
+        h_mm, v_mm = gf.horizontalAperture / tenths, gf.verticalAperture / tenths
+        cx = info.width / 2 - gf.horizontalApertureOffset / tenths / h_mm * info.width
+        cy = info.height / 2 + gf.verticalApertureOffset / tenths / v_mm * info.height
+        assert (info.k[2], info.k[5]) == pytest.approx((cx, cy), abs=1e-6)

@@ -7,12 +7,12 @@ function, :func:`render_html`:
   a shot that fails included;
 - :func:`from_take` / :func:`report_from_mcap`: a camtraj MCAP read back.
 
-``data`` holds the data and its builders, ``page`` the HTML, ``plots`` the matplotlib figures
-(matplotlib is imported only when a figure is drawn).
+``data`` holds the data and its builders, ``samples`` folds the servo samples into what the
+page shows (bounded by the frames and the plot width), ``page`` the HTML, ``plots`` the
+matplotlib figures (matplotlib is imported only when a figure is drawn).
 """
 
 from camtraj.report.data import (
-    QUANTITIES,
     ReportData,
     Violation,
     from_analysis,
@@ -21,14 +21,17 @@ from camtraj.report.data import (
     report_from_mcap,
 )
 from camtraj.report.page import render_html, report_mcap, write_report
+from camtraj.report.samples import QUANTITIES, Samples, reduce_samples
 
 __all__ = [
     "QUANTITIES",
     "ReportData",
+    "Samples",
     "Violation",
     "from_analysis",
     "from_take",
     "pose_indices",
+    "reduce_samples",
     "render_html",
     "report_from_mcap",
     "report_mcap",

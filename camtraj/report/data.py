@@ -7,6 +7,10 @@
   /joint_trajectory (jerk by differences of the accelerations), frames from /shot/frames,
   limits from the ``camtraj.robot`` metadata, link origins from /tf.
 
+Either way the servo samples are folded, a block at a time, into a
+:class:`~camtraj.report.samples.Samples` (per-plot min/max per pixel column, per-frame peaks),
+so the report of a long take needs memory for its film frames, not its servo samples.
+
 :mod:`camtraj.report.page` renders it (:func:`~camtraj.report.page.render_html`).
 """
 
@@ -23,16 +27,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError
+from camtraj.report.samples import QUANTITIES, Samples, in_blocks, reduce_samples
 
 if TYPE_CHECKING:
     from camtraj.analysis import Analysis
-    from camtraj.mcap_io import ReadTake
+    from camtraj.mcap_io import ReportTake
     from camtraj.options import ConvertOptions
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
 #: Above 1 + this fraction of a limit a sample counts as over it (float round-off only).
 LIMIT_RTOL = 1e-9
 #: The same for a take read back from MCAP: its jerk is by differences of the recorded
@@ -58,10 +62,6 @@ class Violation:
         return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in self.frames)
 
 
-def _empty(*shape: int) -> Array:
-    return np.zeros(shape)
-
-
 @dataclass(frozen=True, eq=False)
 class ReportData:
     """Everything the report shows, in SI units and the robot base frame.
@@ -76,8 +76,7 @@ class ReportData:
         placement: How the base was placed (text). base2world: The placement, (4, 4).
         joint_names: Axis names (8,). revolute: Whether each axis is revolute, (8,).
         lower, upper, velocity, acceleration, jerk: The robot's limits, (8,) each.
-        t: Servo sample times [s], (m,); empty without a joint path.
-        q, qd, qdd, qddd: Position, velocity, acceleration, jerk per sample, (m, 8).
+        samples: What the report keeps of the servo samples; None without a joint path.
         frame_numbers: Film frame numbers, (n,). frame_times: Their take times [s], (n,).
         shot_start, shot_end: Take time of the first and the last film frame [s].
         camera_path: Requested camera position per frame [m], (n, 3).
@@ -90,6 +89,8 @@ class ReportData:
         warnings: Things a person should know that do not stop the take.
         tolerance: Fraction above a limit that counts as over it.
         source: Where the data came from (the MCAP file, or "convert"/"check").
+        margins: The terminal's margins, when the take is done.
+        edges: The run-up's and run-out's own peak use, when they are planned.
     """
 
     shot: str
@@ -111,11 +112,7 @@ class ReportData:
     velocity: Array
     acceleration: Array
     jerk: Array
-    t: Array
-    q: Array
-    qd: Array
-    qdd: Array
-    qddd: Array
+    samples: Samples | None
     frame_numbers: IntArray
     frame_times: Array
     shot_start: float
@@ -130,7 +127,9 @@ class ReportData:
     warnings: tuple[str, ...] = ()
     tolerance: float = LIMIT_RTOL
     source: str = "convert"
-    margins: dict[str, Any] | None = None  # convert's margins_summary, when the take is done
+    margins: dict[str, Any] | None = None  # convert's margins_summary
+    # "runup"/"runout" -> axis -> quantity -> fraction of the limit
+    edges: dict[str, dict[str, dict[str, float]]] | None = None
 
     def limit(self, quantity: str) -> Array:
         """The symmetric limit of velocity, acceleration or jerk, shape (8,)."""
@@ -145,77 +144,31 @@ class ReportData:
                 out.update(range(a, b + 1))
         return sorted(out)
 
-    def shot_mask(self) -> NDArray[np.bool_]:
-        """The servo samples of the shot part (first to last film frame)."""
-        eps = 1e-9
-        mask: NDArray[np.bool_] = (self.t >= self.shot_start - eps) & (
-            self.t <= self.shot_end + eps)
-        return mask
-
 
 # ---------------------------------------------------------------------------------------------
 # Shared pieces of the two builders
 # ---------------------------------------------------------------------------------------------
 
 
-def jerk_by_differences(t: Array, qdd: Array, shot: tuple[int, int] | None = None) -> Array:
-    """Jerk from sampled accelerations, shape (m, 8) from t (m,) and qdd (m, 8).
-
-    Central differences (one-sided at the ends): each value is a weighted mean of the mean
-    jerks over the neighbouring steps, so it never overstates the true peak. With ``shot``
-    (the sample indices of the first and the last film frame) no difference spans the
-    switch from the run-up to the shot's path or from it to the run-out; the two frame
-    samples keep the shot's values.
-    """
-    m = t.shape[0]
-    out: Array = np.zeros_like(qdd)
-    a, b = shot if shot is not None else (0, m - 1)
-    for lo, hi, keep in ((0, a, slice(0, a)), (b, m - 1, slice(b + 1, m)),
-                         (a, b, slice(a, b + 1))):
-        if hi > lo:
-            part = np.gradient(qdd[lo:hi + 1], t[lo:hi + 1], axis=0)
-            out[keep] = part[keep.start - lo: keep.stop - lo]
-    return out
-
-
-def fractions(q: Array, qd: Array, qdd: Array, qddd: Array, lower: Array, upper: Array,
-              limits: Sequence[Array]) -> dict[str, Array]:
-    """Each quantity as a fraction of its limit, (m, 8): ±1 at the limits.
-
-    Position: ``(q - mid) / half_range`` (the timing report's position use, signed).
-    """
-    mid, half = 0.5 * (upper + lower), 0.5 * (upper - lower)
-    return {
-        "position": (q - mid) / half,
-        "velocity": qd / limits[0],
-        "acceleration": qdd / limits[1],
-        "jerk": qddd / limits[2],
-    }
-
-
 def violations_from_samples(data: ReportData) -> tuple[Violation, ...]:
     """Every (axis, quantity) whose samples exceed the limit, worst first.
 
     A sample between two film frames counts for both (as in the timing report); run-up
-    samples count for the first frame, run-out samples for the last.
+    samples count for the first frame, run-out samples for the last
+    (:attr:`Samples.frame_peak`).
     """
-    if not data.t.size:
+    if data.samples is None:
         return ()
-    fr = fractions(data.q, data.qd, data.qdd, data.qddd, data.lower, data.upper,
-                   (data.velocity, data.acceleration, data.jerk))
-    ft, fn = data.frame_times, data.frame_numbers
-    hi_idx = np.clip(np.searchsorted(ft, data.t - 1e-9, side="left"), 0, fn.size - 1)
-    lo_idx = np.clip(np.searchsorted(ft, data.t + 1e-9, side="right") - 1, 0, fn.size - 1)
+    fn = data.frame_numbers
     out: list[Violation] = []
-    for quantity in QUANTITIES:
-        use = np.abs(fr[quantity])
+    for k, quantity in enumerate(QUANTITIES):
+        peak = data.samples.frame_peak[k]
         for i, name in enumerate(data.joint_names):
-            over = use[:, i] > 1.0 + data.tolerance
-            if not np.any(over):
+            idx = np.flatnonzero(peak[:, i] > 1.0 + data.tolerance)
+            if not idx.size:
                 continue
-            idx = sorted(set(lo_idx[over].tolist()) | set(hi_idx[over].tolist()))
             frames = _runs([int(fn[j]) for j in idx], [int(j) for j in idx])
-            ratio = float(use[:, i].max())
+            ratio = float(peak[:, i].max())
             text = f"{name} {quantity} {ratio:.3g}{TIMES} its limit on " + _frames_text(frames)
             out.append(Violation(name, quantity, ratio, frames, text))
     out.sort(key=lambda v: -v.ratio)
@@ -239,12 +192,12 @@ def _frames_text(frames: tuple[tuple[int, int], ...]) -> str:
     return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in frames)
 
 
-def track_ends(link2base: Array, q_track: float, lower: float, upper: float) -> Array:
+def track_ends(link2base: Array, lower: float, upper: float) -> Array:
     """The track's ends in the base frame, (2, 3), from one pose's link frames (p, 4, 4).
 
     The track value is measured along frame 0's z axis from the base origin, so the ends are
     the base origin plus the limits along that axis (the carriage's frame 1 sits a constant
-    offset further on; ``q_track`` is not needed and kept for the callers).
+    offset further on).
     """
     origin, direction = link2base[0, :3, 3], link2base[0, :3, 2]
     return np.stack([origin + lim * direction for lim in (lower, upper)])
@@ -317,25 +270,28 @@ def from_analysis(
     }
     poses, pose_frames, track = _in_memory_poses(analysis)
     common.update(poses=poses, pose_frames=pose_frames, track=track)
+    bounds = (limits.lower, limits.upper, (limits.velocity, limits.acceleration, limits.jerk))
     if take is not None:
+        samples = _reduce(take.t, take.q, take.qd, take.qdd, take.qddd, take.frame_times,
+                          (float(take.shot_start), float(take.shot_end)), *bounds)
         data = ReportData(
             **common, status="ok", message="", timing=take.mode,
             speed_factor=float(take.speed_factor), servo_rate_hz=float(take.rate),
-            max_speed=float(take.report.max_speed), t=take.t, q=take.q, qd=take.qd,
-            qdd=take.qdd, qddd=take.qddd, frame_times=take.frame_times,
+            max_speed=float(take.report.max_speed), samples=samples,
+            frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
             tolerance=LIMIT_RTOL,
             margins=None if path is None else margins_summary(path, shot.frames),
+            edges={"runup": take.report.runup.get("peak_use", {}),
+                   "runout": take.report.runout.get("peak_use", {})},
         )
         return data
-    empty: dict[str, Any] = {"t": _empty(0), **{k: _empty(0, limits.size)
-                                                 for k in ("q", "qd", "qdd", "qddd")}}
     frame_times = shot.times - shot.times[0]
     if isinstance(error, UnreachableFramesError) or path is None:
         unreachable = tuple(sorted(int(e.frame) for e in getattr(error, "errors", ())
                                    if e.frame is not None))
         return ReportData(
-            **common, **empty, status="unreachable", message=str(error or ""),
+            **common, samples=None, status="unreachable", message=str(error or ""),
             timing=options.timing, speed_factor=math.nan, servo_rate_hz=math.nan,
             max_speed=math.nan, frame_times=frame_times, shot_start=0.0,
             shot_end=float(frame_times[-1]), unreachable=unreachable,
@@ -344,12 +300,23 @@ def from_analysis(
     max_speed = error.max_speed if isinstance(error, TimingLimitError) else math.nan
     t, q, qd, qdd, qddd, rate = shot_timing_samples(analysis, options.rate, max_speed)
     violations = _violations(getattr(error, "violations", []))
+    shot_span = (0.0, float(frame_times[-1]))
     return ReportData(
         **common, status="limits", message=str(error or ""), timing=options.timing,
-        speed_factor=1.0, servo_rate_hz=rate, max_speed=max_speed, t=t, q=q, qd=qd,
-        qdd=qdd, qddd=qddd, frame_times=frame_times[:n], shot_start=0.0,
+        speed_factor=1.0, servo_rate_hz=rate, max_speed=max_speed,
+        samples=_reduce(t, q, qd, qdd, qddd, frame_times[:n], shot_span, *bounds),
+        frame_times=frame_times[:n], shot_start=0.0,
         shot_end=float(frame_times[-1]), violations=violations,
     )
+
+
+def _reduce(t: Array, q: Array, qd: Array, qdd: Array, qddd: Array, frame_times: Array,
+            shot: tuple[float, float], lower: Array, upper: Array,
+            limits: tuple[Array, Array, Array]) -> Samples:
+    """Samples already in memory, reduced as a file's are."""
+    return reduce_samples(in_blocks(t, q, qd, qdd, qddd), count=t.shape[0],
+                          start=float(t[0]), end=float(t[-1]), frame_times=frame_times,
+                          shot=shot, lower=lower, upper=upper, limits=limits)
 
 
 def _violations(found: Sequence[Any]) -> tuple[Violation, ...]:
@@ -370,8 +337,7 @@ def _in_memory_poses(analysis: Analysis) -> tuple[Array, IntArray, Array]:
     idx = pose_indices(0 if path is None else path.q.shape[0])
     qs = robot.home[None] if path is None else path.q[idx]
     frames = robot.link_frames(qs)
-    track = track_ends(frames[0], float(qs[0, 0]), float(robot.lower[0]),
-                       float(robot.upper[0]))
+    track = track_ends(frames[0], float(robot.lower[0]), float(robot.upper[0]))
     if path is None:  # nothing solved to draw; the track still shows where the robot is
         return np.zeros((0, 11, 3)), idx, track
     cams = frames[:, -1] @ robot.camera2flange
@@ -421,7 +387,7 @@ def shot_timing_samples(
 # ---------------------------------------------------------------------------------------------
 
 
-def from_take(take: ReadTake, source: str | Path) -> ReportData:
+def from_take(take: ReportTake, source: str | Path) -> ReportData:
     """The report of a converted take, from its MCAP file read back.
 
     Raises:
@@ -435,11 +401,15 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         msg = f"{source}: no robot limits or no shot frames recorded; not a camtraj take?"
         raise InputError(msg)
     where = f"{source}: the camtraj metadata"
-    n = len(take.trajectory_joint_names)
-    if take.trajectory_q.ndim != 2 or take.trajectory_q.shape[1] != n:
-        msg = f"{source}: /joint_trajectory names {n} joints for its positions"
-        raise InputError(msg)
+    from camtraj.robot import JOINT_KINDS
+
     lens = _lens_axes(robot_md.get("lens"), f"{where} {ROBOT_METADATA_NAME}.lens")
+    n = len(take.joint_names)
+    if n != len(JOINT_KINDS) + len(lens) or take.point_count < 1:
+        msg = (f"{source}: /joint_trajectory has {n} joints and {take.point_count} points; "
+               f"a camtraj take has {len(JOINT_KINDS)} joints"
+               + (f" and {len(lens)} lens axes" if lens else ""))
+        raise InputError(msg)
     lim = {k: _numbers(_joined(robot_md.get(k), lens, k), n,
                        f"{where} {ROBOT_METADATA_NAME}.{k}")
            for k in ("lower", "upper", "max_velocity", "max_acceleration", "max_jerk")}
@@ -455,6 +425,7 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         placement = json.loads(md.get("placement", "{}"))
         warnings = json.loads(md.get("warnings", "[]"))
         margins = json.loads(md["margins"]) if "margins" in md else None  # older files: none
+        edges = json.loads(md["edge_peak_use"]) if "edge_peak_use" in md else None
     except ValueError as exc:
         msg = f"{where} cannot be read ({exc})"
         raise InputError(msg) from None
@@ -462,6 +433,9 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
     if margins is not None and not _margins_ok(margins):
         msg = f"{where} margins must hold to_limits, to_limits_frame (per axis) and the wrist " \
               "and stretch margins with their frames"
+        raise InputError(msg)
+    if edges is not None and not _edges_ok(edges):
+        msg = f"{where} edge_peak_use must map runup and runout to axis -> quantity -> number"
         raise InputError(msg)
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         msg = f"{where} warnings must be a list of texts"
@@ -471,19 +445,27 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         if not (math.isfinite(value) and value > 0.0):
             msg = f"{where} {key} = {md.get(key)!r} must be a positive number"
             raise InputError(msg)
-    if take.tf_times.size == 0:
+    if take.tf_count == 0 or take.tf_times.size == 0:
         msg = f"{source}: no /tf messages; the report's robot views need them"
         raise InputError(msg)
-    from camtraj.robot import JOINT_KINDS
+    from camtraj.report.samples import jerk_by_differences
 
-    names = tuple(take.trajectory_joint_names)
+    names = tuple(take.joint_names)
     revolute = np.array([k == "revolute" for k in JOINT_KINDS] + [True] * len(lens))
-    t, q = take.trajectory_t, take.trajectory_q
-    qdd = take.trajectory_qdd
     mode = md.get("timing_mode", "?")
     poses, pose_frames, track = _tf_poses(take, float(lim["lower"][0]), float(lim["upper"][0]))
-    first, last = np.searchsorted(t, take.frame_times[[0, -1]] - 1e-9).tolist()
-    shot_samples = (int(first), int(last))
+    ft = take.frame_times
+    first, last = take.count_before(ft[[0, -1]] - 1e-9).tolist()
+    shot = (float(ft[0]), float(ft[-1]))
+    limits = (lim["max_velocity"], lim["max_acceleration"], lim["max_jerk"])
+    samples = reduce_samples(
+        jerk_by_differences(take.trajectory_blocks(), take.point_count, (first, last)),
+        count=take.point_count, start=take.first_time, end=take.last_time, frame_times=ft,
+        shot=shot, lower=lim["lower"], upper=lim["upper"], limits=limits)
+    if edges is None:  # older files: the run-up's and run-out's samples
+        edges = {side: {name: dict(zip(QUANTITIES[1:], samples.edge_peak[k, 1:, i].tolist(),
+                                       strict=True)) for i, name in enumerate(names)}
+                 for k, side in enumerate(("runup", "runout"))}
     data = ReportData(
         shot=md.get("source_file", "?"), camera=md.get("camera_prim", "?"),
         robot=md.get("robot", "?"), status="ok", message="", timing=mode,
@@ -492,13 +474,11 @@ def from_take(take: ReadTake, source: str | Path) -> ReportData:
         max_speed=_float(md.get("max_speed")), placement=_placement_text(placement),
         base2world=_base2world(placement), joint_names=names, revolute=revolute,
         lower=lim["lower"], upper=lim["upper"], velocity=lim["max_velocity"],
-        acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], t=t, q=q,
-        qd=take.trajectory_qd, qdd=qdd, qddd=jerk_by_differences(t, qdd, shot_samples),
-        frame_numbers=take.frame_numbers, frame_times=take.frame_times,
-        shot_start=float(take.frame_times[0]), shot_end=float(take.frame_times[-1]),
+        acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], samples=samples,
+        frame_numbers=take.frame_numbers, frame_times=ft, shot_start=shot[0], shot_end=shot[1],
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
         poses=poses, pose_frames=pose_frames, track=track, warnings=tuple(warnings),
-        tolerance=MCAP_RTOL, source=str(source), margins=margins,
+        tolerance=MCAP_RTOL, source=str(source), margins=margins, edges=edges,
     )
     return _with_violations(data)
 
@@ -579,6 +559,14 @@ def _margins_ok(m: Any) -> bool:
                                                 "full_stretch_deg", "full_stretch_frame")))
 
 
+def _edges_ok(e: Any) -> bool:
+    return (isinstance(e, dict) and set(e) == {"runup", "runout"}
+            and all(isinstance(side, dict) and all(
+                isinstance(use, dict) and all(
+                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in use.values()) for use in side.values()) for side in e.values()))
+
+
 def _float(text: str | None) -> float:
     try:
         return float(text) if text is not None else math.nan
@@ -586,17 +574,25 @@ def _float(text: str | None) -> float:
         return math.nan
 
 
-def _tf_poses(take: ReadTake, lower: float, upper: float) -> tuple[Array, IntArray, Array]:
+def _pose_times(frame_times: Array) -> Array:
+    """The take times of the frames drawn as robot poses (the /tf samples a report reads)."""
+    out: Array = frame_times[pose_indices(frame_times.size)]
+    return out
+
+
+def _tf_poses(take: ReportTake, lower: float, upper: float) -> tuple[Array, IntArray, Array]:
     """Link origins from /tf at a few film frames (the nearest /tf sample), and the track."""
     from camtraj.urdf import BASE_FRAME, CAMERA_FRAME, LINK_FRAMES
 
     chain = [*LINK_FRAMES, CAMERA_FRAME]
     k_idx = pose_indices(take.frame_numbers.size)
-    tf_i = np.abs(take.tf_times[None, :] - take.frame_times[k_idx, None]).argmin(axis=1)
+    tf_i = np.arange(take.tf_times.size)  # read at _pose_times, one per pose
 
     def to_base(frame: str, j: int) -> Array:
         T = np.eye(4)
-        while frame != BASE_FRAME:
+        for _ in range(len(take.tf) + len(take.tf_static) + 1):  # no loop in a bad tree
+            if frame == BASE_FRAME:
+                return T
             if frame in take.tf:
                 parent, mats = take.tf[frame]
                 T = mats[j] @ T
@@ -604,16 +600,14 @@ def _tf_poses(take: ReadTake, lower: float, upper: float) -> tuple[Array, IntArr
                 parent, mat = take.tf_static[frame]
                 T = mat @ T
             else:
-                msg = f"/tf has no path from {frame} to {BASE_FRAME}"
-                raise InputError(msg)
+                break
             frame = parent
-        return T
+        msg = f"/tf has no path from {frame} to {BASE_FRAME}"
+        raise InputError(msg)
 
     frames = np.array([[to_base(f, int(j)) for f in chain] for j in tf_i])
     origins = np.concatenate([np.zeros((len(tf_i), 1, 3)), frames[:, :, :3, 3]], axis=1)
-    q_track = float(np.interp(take.tf_times[tf_i[0]], take.trajectory_t,
-                              take.trajectory_q[:, 0]))
-    track = track_ends(frames[0], q_track, lower, upper)
+    track = track_ends(frames[0], lower, upper)
     return origins, take.frame_numbers[k_idx].astype(np.int64), track
 
 
@@ -623,4 +617,4 @@ def report_from_mcap(path: str | Path) -> ReportData:
     from camtraj.mcap_io import read_take_for_report
 
     require_regular_file(path, "MCAP file", InputError)  # a FIFO would block the read
-    return from_take(read_take_for_report(path), path)
+    return from_take(read_take_for_report(path, _pose_times), path)

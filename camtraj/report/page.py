@@ -10,14 +10,12 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 import camtraj
 from camtraj.errors import frame_ranges
-from camtraj.report.data import QUANTITIES, ReportData, fractions
+from camtraj.report.data import ReportData
 from camtraj.report.plots import COLORS, figures, limit_text
-from camtraj.shown import percent, seconds, speed_percent
+from camtraj.report.samples import QUANTITIES
+from camtraj.shown import EDGE_QUANTITIES, edge_use, percent, seconds, speed_percent
 
 # ---------------------------------------------------------------------------------------------
 # The page
@@ -69,11 +67,12 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
         ("placement", data.placement),
         ("timing mode", data.timing),
     ]
-    if data.t.size:
+    s = data.samples
+    if s is not None:
         rows += [
             ("speed factor", f"{data.speed_factor:.3f} (shot duration in the take / its own)"),
             ("servo rate", f"{data.servo_rate_hz:.1f} Hz"),
-            ("take", f"{seconds(data.t[-1] - data.t[0])} s; shot "
+            ("take", f"{seconds(s.end - s.start)} s; shot "
                      f"{seconds(data.shot_start)}-{seconds(data.shot_end)} s"),
         ]
     if math.isfinite(data.max_speed):
@@ -82,43 +81,42 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
                      f"{math.floor(100 * data.fps * data.max_speed) / 100:.2f} fps)"))
     elif data.status != "unreachable":
         rows.append(("maximum feasible speed", "not recorded in this file"))
-    if data.status == "ok":
+    if data.status == "ok" and s is not None:
         rows.append(("run-up / run-out",
-                     f"{seconds(data.shot_start - data.t[0])} s / "
-                     f"{seconds(data.t[-1] - data.shot_end)} s"))
+                     f"{seconds(data.shot_start - s.start)} s / "
+                     f"{seconds(s.end - data.shot_end)} s"))
     else:
         rows.append(("run-up / run-out", "not planned: the shot itself cannot be done as asked"))
     return rows
 
 
 def margins(data: ReportData) -> list[dict[str, Any]]:
-    """Per axis: peak use of each limit over the shot part, and the run-up / run-out extents
-    (display units: m or deg)."""
-    shot = data.shot_mask()
-    fr = fractions(data.q, data.qd, data.qdd, data.qddd, data.lower, data.upper,
-                   (data.velocity, data.acceleration, data.jerk))
-    up = data.t <= data.shot_start + 1e-9
-    out = data.t >= data.shot_end - 1e-9
+    """Per axis: peak use of each limit over the shot part, the run-up's and run-out's peak
+    acceleration and jerk use (the larger of the two, as the terminal's "ends" columns) and
+    their extents (display units: m or deg)."""
+    s = data.samples
+    assert s is not None
+    ends = (edge_use(data.edges["runup"], data.edges["runout"], data.joint_names)
+            if data.edges is not None else None)
     rows = []
     for i, name in enumerate(data.joint_names):
         scale = math.degrees(1.0) if data.revolute[i] else 1.0
-
-        def extent(mask: NDArray[np.bool_], i: int = i, scale: float = scale) -> float:
-            x = data.q[mask, i]
-            return float((x.max() - x.min()) * scale) if x.size else 0.0
-
+        ok = data.status == "ok"
         rows.append({
             "axis": name, "unit": "deg" if data.revolute[i] else "m",
-            **{qn: float(np.abs(fr[qn][shot, i]).max()) for qn in QUANTITIES},
-            "runup": extent(up) if data.status == "ok" else math.nan,
-            "runout": extent(out) if data.status == "ok" else math.nan,
+            **{qn: float(s.shot_peak[k, i]) for k, qn in enumerate(QUANTITIES)},
+            **{f"ends_{qn}": ends[name][qn] if ends is not None else math.nan
+               for qn in EDGE_QUANTITIES},
+            "runup": float(s.edge_extent[0, i] * scale) if ok else math.nan,
+            "runout": float(s.edge_extent[1, i] * scale) if ok else math.nan,
         })
     return rows
 
 
 def _margins_table(data: ReportData) -> str:
     head = "".join(f"<th>{q}</th>" for q in QUANTITIES)
-    lines = [f"<table class='margins'><tr><th>axis</th>{head}<th>run-up extent</th>"
+    ends = "".join(f"<th>run-up/run-out {q}</th>" for q in EDGE_QUANTITIES)
+    lines = [f"<table class='margins'><tr><th>axis</th>{head}{ends}<th>run-up extent</th>"
              "<th>run-out extent</th></tr>"]
     over = data.tolerance
     for row in margins(data):
@@ -127,13 +125,16 @@ def _margins_table(data: ReportData) -> str:
             v = row[q]
             cls = "over" if v > 1 + over else "warn" if v > 0.8 else ""
             cells.append(f"<td class='num {cls}'>{percent(v)}</td>")
+        for q in EDGE_QUANTITIES:
+            cells.append(f"<td class='num ends'>{percent(row[f'ends_{q}'])}</td>")
         ext = [("-" if not math.isfinite(row[k]) else f"{row[k]:.3f} {row['unit']}")
                for k in ("runup", "runout")]
         lines.append(f"<tr><td><a href='#axis-{_e(row['axis'])}'>{_e(row['axis'])}</a></td>"
                      + "".join(cells) + "".join(f"<td class='num'>{x}</td>" for x in ext)
                      + "</tr>")
     lines.append("</table><p>Peak use of each limit over the shot (first to last film frame); "
-                 "position: 0% mid-range, 100% at a bound.</p>")
+                 "position: 0% mid-range, 100% at a bound. Run-up/run-out: their own peak "
+                 "use (the larger of the two), apart from the shot's.</p>")
     if data.margins is not None:
         lines.append(_closest_table(data, data.margins))
     return "\n".join(lines)
@@ -194,7 +195,7 @@ def render_html(data: ReportData) -> str:
         parts.append("<h3>Warnings</h3><ul class='warnings'>")
         parts += [f"<li>{_e(w)}</li>" for w in data.warnings]
         parts.append("</ul>")
-    if data.t.size:
+    if data.samples is not None:
         parts += ["<h3>Margins</h3>", _margins_table(data)]
     parts.append("</section>")
     if path_fig:

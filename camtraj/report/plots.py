@@ -10,8 +10,9 @@ Two kinds of figure, both drawn from a :class:`camtraj.report.ReportData`:
   frame, to scale, with the track from its min to its max, the base, the stage origin (the
   placement) and a few robot poses as stick figures through the link origins.
 
-Servo samples are drawn as a min/max envelope per pixel column (:func:`envelope`), so a long
-take stays a small SVG while every peak is kept. Output is deterministic: a fixed SVG hash
+Servo samples are drawn as their minimum and maximum per pixel column
+(:class:`camtraj.report.samples.Samples`), so a long take stays a small SVG while every peak
+is kept. Output is deterministic: a fixed SVG hash
 salt per figure (unique ids in one HTML page) and no date in the metadata.
 
 Element ids (``gid``) the tests and a reader of the page can rely on, per axis ``A`` and
@@ -30,16 +31,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.report.samples import QUANTITIES
+
 if TYPE_CHECKING:
     from camtraj.report.data import ReportData
 
 Array = NDArray[np.float64]
 
-QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
-#: Pixel columns of a plot; servo samples are reduced to a min/max pair per column.
-ENVELOPE_COLUMNS = 700
 #: At most this many film frames get a tick; longer shots tick every k-th frame.
 MAX_FRAME_TICKS = 240
+#: The camera path in the views is drawn through at most about 5x this many frames.
+PATH_RUNS = 600
 
 _WIDTH_IN = 12.0
 _DPI = 100
@@ -53,50 +55,6 @@ COLORS = {"position": "#404040", "velocity": "#1f5fa8", "acceleration": "#e08a00
 #: readable.
 Y_MAX = 2.5
 TIMES = "\u00d7"  # the multiplication sign
-
-
-def envelope(t: Array, y: Array, columns: int = ENVELOPE_COLUMNS) -> tuple[Array, Array]:
-    """Reduce a sampled curve to its minimum and maximum per column, in time order.
-
-    Args:
-        t: Sample times [s], shape (m,), non-decreasing.
-        y: Values, shape (m,).
-        columns: Number of equal time columns.
-
-    Returns:
-        ``(t_out, y_out)``, at most ``2 * columns`` points, each a real sample: per column the
-        first sample holding its minimum and the first holding its maximum, in time order.
-        Short inputs come back unchanged.
-    """
-    m = t.shape[0]
-    if m <= 2 * columns or t[-1] <= t[0]:
-        return t, y
-    col = np.minimum(((t - t[0]) / (t[-1] - t[0]) * columns).astype(np.int64), columns - 1)
-    starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
-    idx = np.arange(m)
-    lo = np.repeat(np.minimum.reduceat(y, starts), np.diff(np.r_[starts, m]))
-    hi = np.repeat(np.maximum.reduceat(y, starts), np.diff(np.r_[starts, m]))
-    first_lo = np.minimum.reduceat(np.where(y == lo, idx, m), starts)
-    first_hi = np.minimum.reduceat(np.where(y == hi, idx, m), starts)
-    keep = np.unique(np.concatenate([first_lo, first_hi]))
-    return t[keep], y[keep]
-
-
-# ---------------------------------------------------------------------------------------------
-# Per-axis plots
-# ---------------------------------------------------------------------------------------------
-
-
-def _fraction(data: ReportData, axis: int, quantity: str) -> Array:
-    """The quantity as a fraction of its limit: ±1 at the limits (position: at its bounds)."""
-    if quantity == "position":
-        mid = 0.5 * (data.upper[axis] + data.lower[axis])
-        half = 0.5 * (data.upper[axis] - data.lower[axis])
-        out: Array = (data.q[:, axis] - mid) / half
-        return out
-    values = {"velocity": data.qd, "acceleration": data.qdd, "jerk": data.qddd}[quantity]
-    out = values[:, axis] / data.limit(quantity)[axis]
-    return out
 
 
 def _unit(data: ReportData, axis: int, quantity: str) -> tuple[str, float]:
@@ -143,7 +101,7 @@ def figures(data: ReportData) -> tuple[str, list[str]]:
 
     with matplotlib.rc_context(_RC):
         path = path_svg(data) if data.camera_path.shape[0] else ""
-        axes = axis_svgs(data) if data.t.size else []
+        axes = axis_svgs(data) if data.samples is not None else []
     return path, axes
 
 
@@ -170,7 +128,8 @@ def axis_svgs(data: ReportData) -> list[str]:
     tick_y = np.tile([0.0, 0.05, np.nan], ticks.shape[0])
     (frame_ticks,) = ax.plot(tick_x, tick_y, transform=ax.get_xaxis_transform(),
                              color="#4a4a4a", lw=0.6, zorder=5)
-    ax.set_xlim(float(data.t[0]), float(data.t[-1]))
+    assert data.samples is not None
+    ax.set_xlim(data.samples.start, data.samples.end)
     ax.set_ylabel(f"{TIMES} limit", fontsize=9)
     ax.set_xlabel("take time [s] / film frame   (shaded: the shot; ticks: film frames)",
                   fontsize=8)
@@ -204,11 +163,10 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
     added: list[Any] = []
     violated = {v.quantity: v for v in data.violations if v.axis == name}
     peak = 1.0
-    curves = {}
+    assert data.samples is not None
     for quantity in QUANTITIES:
-        y = curves[quantity] = _fraction(data, axis, quantity)
-        peak = max(peak, float(np.max(np.abs(y))) if y.size else 0.0)
-        te, ye = envelope(data.t, y)
+        te, ye = data.samples.curves[(quantity, axis)]  # every column's extremes
+        peak = max(peak, float(np.max(np.abs(ye))) if ye.size else 0.0)
         added += ax.plot(te, ye, color=COLORS[quantity], lw=1.0, zorder=3,
                          gid=f"{name}-{quantity}-curve")
         over = np.where(np.abs(ye) > 1.0 + data.tolerance, ye, np.nan)
@@ -228,7 +186,7 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
             added.append(ax.axvspan(ta, tb, color=_RED, alpha=0.15, lw=0, zorder=1,
                                     gid=f"{name}-{quantity}-violation-{a}-{b}"))
             label = f"frames {a}-{b}" if b != a else f"frame {a}"
-            ratio = span_peak(data, curves[quantity], a, b, v.ratio)
+            ratio = span_peak(data, axis, quantity, a, b, v.ratio)
             labels.append(ax.text(
                 0.5 * (ta + tb), 0.96, f"{quantity} {ratio:.3g}{TIMES} limit, {label}",
                 transform=ax.get_xaxis_transform(), ha="center", va="top", color=_RED,
@@ -243,17 +201,18 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
     return added
 
 
-def span_peak(data: ReportData, y: Array, a: int, b: int, whole: float) -> float:
-    """The peak of ``|y|`` (× limit) over the servo samples of frames a..b: between the frames
-    before and after the run, as the timing check measures a frame's neighbourhood, and never
-    above the whole violation's peak ``whole``."""
-    fn, ft = data.frame_numbers, data.frame_times
-    lo = float(np.interp(a - 1, fn, ft, left=-np.inf))
-    hi = float(np.interp(b + 1, fn, ft, right=np.inf))
-    inside = (data.t >= lo) & (data.t <= hi)
+def span_peak(data: ReportData, axis: int, quantity: str, a: int, b: int,
+              whole: float) -> float:
+    """The peak of ``|fraction|`` over the servo samples that count for frames a..b (those
+    between the frames before and after the run, as the timing check measures a frame's
+    neighbourhood), never above the whole violation's peak ``whole``."""
+    assert data.samples is not None
+    fn = data.frame_numbers
+    inside = (fn >= a) & (fn <= b)
     if not np.any(inside):
         return whole
-    return min(float(np.max(np.abs(y[inside]))), whole)
+    peak = data.samples.frame_peak[QUANTITIES.index(quantity), inside, axis]
+    return min(float(peak.max()), whole)
 
 
 def _renderer(fig: Any) -> Any:
@@ -326,6 +285,32 @@ def limit_text(data: ReportData, axis: int, quantity: str) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
+def path_frames(xy: Array, runs: int = PATH_RUNS,
+                must: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
+    """Indices of the film frames the camera path is drawn through, in frame order.
+
+    A path of at most ``5 * runs`` frames keeps them all. A longer one is cut into ``runs``
+    runs of consecutive frames, and each run keeps its first frame and those with the least
+    and the greatest of each coordinate of ``xy`` (n, 2), so every excursion of the path
+    stays drawn; ``must`` frames are kept too.
+    """
+    n = xy.shape[0]
+    if n <= 5 * runs:
+        return np.arange(n, dtype=np.int64)
+    starts = np.linspace(0, n, runs + 1).astype(np.int64)[:-1]
+    lengths = np.diff(np.r_[starts, n])
+    where = np.arange(n)[:, None]
+    keep = [starts, np.array([n - 1])]
+    for reduce in (np.minimum, np.maximum):
+        value = np.repeat(reduce.reduceat(xy, starts, axis=0), lengths, axis=0)
+        first = np.minimum.reduceat(np.where(xy == value, where, n), starts, axis=0)
+        keep.append(np.minimum(first, n - 1).ravel())
+    if must is not None:
+        keep.append(must)
+    out: NDArray[np.int64] = np.unique(np.concatenate(keep).astype(np.int64))
+    return out
+
+
 def _view_points(data: ReportData) -> Array:
     """Every point a view must show [m], (p, 3)."""
     pts: list[Any] = [data.track, np.zeros((1, 3)), data.camera_path, data.poses.reshape(-1, 3)]
@@ -389,8 +374,12 @@ def path_svg(data: ReportData) -> str:
                 gid=f"view-{k}-frame-{data.pose_frames[j]}"))
         _stack_annotations(ax, notes)
         if cam.shape[0]:
-            ax.plot(cam[:, 0], cam[:, k], color=_BLUE, lw=1.8, zorder=3, gid=f"view-{k}-path",
-                    label="camera path")
+            mask = np.isin(data.frame_numbers, bad_frames)
+            edges = np.flatnonzero(np.diff(np.r_[False, mask, False]))  # runs' ends
+            drawn = path_frames(cam[:, [0, k]], must=np.clip(np.r_[edges, edges - 1], 0,
+                                                              cam.shape[0] - 1))
+            ax.plot(cam[drawn, 0], cam[drawn, k], color=_BLUE, lw=1.8, zorder=3,
+                    gid=f"view-{k}-path", label="camera path")
             look = data.camera_look
             step = max(1, cam.shape[0] // 12)
             ax.quiver(cam[::step, 0], cam[::step, k], look[::step, 0], look[::step, k],
@@ -400,10 +389,10 @@ def path_svg(data: ReportData) -> str:
                     label=f"first frame {data.frame_numbers[0]}")
             ax.plot(cam[-1, 0], cam[-1, k], "s", color=_BLUE, ms=6, zorder=4,
                     label=f"last frame {data.frame_numbers[-1]}")
-            mask = np.isin(data.frame_numbers, bad_frames)
             if np.any(mask):
-                ax.plot(cam[:, 0], np.where(mask, cam[:, k], np.nan), color=_RED, lw=3.0,
-                        zorder=4, label="frames over a limit", gid=f"view-{k}-over")
+                ax.plot(cam[drawn, 0], np.where(mask[drawn], cam[drawn, k], np.nan),
+                        color=_RED, lw=3.0, zorder=4, label="frames over a limit",
+                        gid=f"view-{k}-over")
             if data.unreachable:
                 um = np.isin(data.frame_numbers, data.unreachable)
                 ax.plot(cam[um, 0], cam[um, k], "x", color=_RED, ms=5, zorder=5,
