@@ -66,13 +66,16 @@ class Analysis:
     take: Take | None = None
     timings: dict[str, float] = field(default_factory=dict)
     collision: dict[str, Any] | None = None  # what the collision check found, if it ran
+    lens_q: Array | None = None  # (n, lens axes) lens motor positions per frame [rad]
 
 
 def axis_value(name: str, value: float) -> float:
-    """SI value for display: degrees for revolute axes, metres otherwise."""
+    """SI value for display: degrees for revolute axes and lens motors (ring angles), metres
+    otherwise."""
     from camtraj.robot import JOINT_NAMES, REVOLUTE
 
-    return math.degrees(value) if REVOLUTE[JOINT_NAMES.index(name)] else value
+    revolute = name not in JOINT_NAMES or REVOLUTE[JOINT_NAMES.index(name)]
+    return math.degrees(value) if revolute else value
 
 
 def margins_summary(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:

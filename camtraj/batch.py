@@ -543,7 +543,8 @@ def run_batch(
     make_parent(out / REPORT_NAME, "-o")
     remove_stale_temps(out)
 
-    extra_inputs = [Path(p) for p in (options.robot, options.set_file) if p is not None]
+    extra_inputs = [Path(p) for p in (options.robot, options.set_file, options.lens)
+                    if p is not None]
     wanted = json.loads(json.dumps(options_to_json(options)))  # as read back from a summary
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []

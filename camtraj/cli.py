@@ -360,10 +360,10 @@ def _limits_used(d: dict[str, Any]) -> list[str]:
         lines.append("limits used (peak over the shot, % of each limit; position: 0% mid-range, "
                      "100% at a limit):")
         lines.append("  axis      position velocity  accel   jerk   range used")
-        for i, name in enumerate(JOINT_NAMES):
+        for name, revolute in _axes(use):
             u = use.get(name, {})
-            conv = math.degrees if REVOLUTE[i] else float
-            unit = "deg" if REVOLUTE[i] else "m"
+            conv = math.degrees if revolute else float
+            unit = "deg" if revolute else "m"
             lo, hi = (conv(v) for v in ranges.get(name, (math.nan, math.nan)))
             lines.append(
                 f"  {name:<8} {_pct(u.get('position', math.nan))}    "
@@ -380,7 +380,24 @@ def _limits_used(d: dict[str, Any]) -> list[str]:
             lo, hi = conv(limits["lower"][i]), conv(limits["upper"][i])
             v = conv(limits["max_velocity"][i])
             lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] {unit:<3}  {v:8.3f} {unit}/s")
+        lens = limits.get("lens")
+        if lens:
+            lines.append(f"lens {lens['name']} ({lens['source']}): motor positions are ring "
+                         "angles; calibrated range of each axis's lens quantity:")
+            for name, ax in lens["axes"].items():
+                lo, hi = math.degrees(ax["lower"]), math.degrees(ax["upper"])
+                v = math.degrees(ax["max_velocity"])
+                lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] deg  {v:8.3f} deg/s  "
+                             f"{ax['quantity']} {ax['range'][0]} to {ax['range'][1]} "
+                             f"{ax['quantity_unit']}")
     return lines
+
+
+def _axes(table: dict[str, Any]) -> list[tuple[str, bool]]:
+    """(name, revolute) of the eight joints, then any lens motors (ring angles) ``table``
+    (an axis -> values mapping) has."""
+    lens = [(name, True) for name in ("zoom", "focus", "iris") if name in table]
+    return [*zip(JOINT_NAMES, REVOLUTE.tolist(), strict=True), *lens]
 
 
 def _unreachable_report(shot: str, exc: UnreachableFramesError) -> dict[str, Any]:
@@ -489,19 +506,21 @@ def _report(r: dict[str, Any]) -> str:
         "(extent)   margin  to start",
     ]
     ends = edge_use(r["runup"].get("peak_use", {}), r["runout"].get("peak_use", {}),
-                    JOINT_NAMES)
+                    [name for name, _ in _axes(r["peak_use"])])
     margins, start = r["margins"], r["move_to_start"]
-    for i, name in enumerate(JOINT_NAMES):
+    for name, revolute in _axes(r["peak_use"]):
         use = r["peak_use"].get(name, {})
-        unit = "deg" if REVOLUTE[i] else "m"
+        unit = "deg" if revolute else "m"
         up = r["runup"]["extent"].get(name, 0.0)
         out = r["runout"]["extent"].get(name, 0.0)
+        joint = name in margins["to_limits"]  # the lens motors have no IK margins
         lines.append(
             f"  {name:<8} {_pct(use.get('position', math.nan))}    "
             f"{_pct(use.get('velocity', math.nan))}   {_pct(use.get('acceleration', math.nan))}"
             f"  {_pct(use.get('jerk', math.nan))}        {_pct(ends[name]['acceleration'])}"
             f" {_pct(ends[name]['jerk'])}  {up:7.3f}  {out:7.3f} {unit:<3}"
-            f" {margins['to_limits'][name]:8.3f} {start['extent'][name]:8.3f}"
+            + (f" {margins['to_limits'][name]:8.3f} {start['extent'][name]:8.3f}" if joint
+               else "        -        -")
         )
     lines.append(f"  margin: wrist singularity {margins['wrist_singularity_deg']:.1f} deg (frame "
                  f"{margins['wrist_singularity_frame']}), full stretch "

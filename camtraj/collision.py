@@ -543,9 +543,10 @@ def check_take(
     """
     obstacles = read_obstacles(shot_path, patterns, shot_time_codes)
     model = CollisionModel(robot, obstacles)
-    idx = take_samples(robot, take.q, take.frame_samples)
+    q = take.q[:, :len(robot.joint_names)]  # the joints (a lens's motors move no link)
+    idx = take_samples(robot, q, take.frame_samples)
     t = take.t[idx]
     tcs = sample_times(t, take.frame_times, shot_time_codes)
     # the film frame at or after each sample (the run-up reports the first frame)
     at = np.searchsorted(take.frame_times, t - 1e-12).clip(0, len(take.frame_numbers) - 1)
-    return check_samples(model, take.q[idx], tcs, take.frame_numbers[at], base2world, clearance)
+    return check_samples(model, q[idx], tcs, take.frame_numbers[at], base2world, clearance)

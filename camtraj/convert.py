@@ -78,7 +78,15 @@ def load_shot(shot_path: str | Path, options: ConvertOptions) -> Shot:
 
 
 def load_robot(options: ConvertOptions) -> Robot:
-    return Robot.default() if options.robot is None else Robot.from_toml(options.robot)
+    """The robot of a run, with the lens of ``--lens`` (else the robot file's ``[lens]``)."""
+    robot = Robot.default() if options.robot is None else Robot.from_toml(options.robot)
+    if options.lens is not None:
+        from dataclasses import replace
+
+        from camtraj.lens import Lens
+
+        robot = replace(robot, lens=Lens.from_toml(options.lens))
+    return robot
 
 
 def load_placement(options: ConvertOptions) -> Placement:
@@ -144,6 +152,10 @@ def analyse(
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
         on_start(analysis)
+    if robot.lens is not None:  # a frame beyond the lens's calibration is an error up front
+        from camtraj.lens import lens_positions
+
+        analysis.lens_q = lens_positions(robot.lens, shot)
     # frame by frame (paper), or the whole shot in steps, each worth its share of the frames
     progress.stage("solve", int(shot.frames.shape[0]), unit="frame")
     with _stage(timings, "ik"):
@@ -154,8 +166,14 @@ def analyse(
         )
     progress.stage("time")
     with _stage(timings, "timing"):
+        q_frames, limits = analysis.path.q, Limits.from_robot(robot)
+        if robot.lens is not None and analysis.lens_q is not None:  # more axes, more limits
+            q_frames = np.hstack([q_frames, analysis.lens_q])
+            limits = limits.joined(robot.lens.limits())
+            if start is not None:  # the lens motors start where the first frame needs them
+                start = np.concatenate([start, analysis.lens_q[0]])
         analysis.take = time_shot(
-            analysis.path.q, shot.times, Limits.from_robot(robot), mode=options.timing,
+            q_frames, shot.times, limits, mode=options.timing,
             rate=options.rate, frame_numbers=shot.frames, start=start,
             hold=camera_holds(targets), edges=options.edges,
         )
@@ -261,15 +279,29 @@ def _rig_bytes(analysis: Analysis, rig_layer: str | Path) -> bytes:
 
     assert analysis.path is not None
     return rig_layer_bytes(rig_layer, analysis.shot, analysis.robot,
-                           analysis.placement.base2world, analysis.path.q)
+                           analysis.placement.base2world, analysis.path.q,
+                           lens=_commanded_lens(analysis))
+
+
+def _commanded_lens(analysis: Analysis) -> dict[str, NDArray[np.float64]] | None:
+    """The lens the motors give per frame (:func:`camtraj.lens.commanded_lens`), or None."""
+    lens = analysis.robot.lens
+    if lens is None or analysis.lens_q is None:
+        return None
+    from camtraj.lens import commanded_lens
+
+    return commanded_lens(lens, analysis.lens_q, analysis.shot)
 
 
 def take_data(analysis: Analysis) -> TakeData:
     """The writer's view of a finished analysis."""
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
+    lens_names = () if analysis.robot.lens is None else analysis.robot.lens.names
+    commanded = _commanded_lens(analysis)
     return TakeData(
-        joint_names=JOINT_NAMES,
+        joint_names=(*JOINT_NAMES, *lens_names), lens_names=lens_names,
+        camera_focal_length_mm=None if commanded is None else commanded["focal_length_mm"],
         t=take.t, q=take.q, qd=take.qd, qdd=take.qdd,
         frame_numbers=shot.frames, frame_times=take.frame_times, frame_q=path.q,
         target=analysis.targets, achieved=analysis.robot.camera_pose(path.q),
@@ -312,6 +344,8 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "edge_peak_use": json.dumps({"runup": take.report.runup.get("peak_use", {}),
                                      "runout": take.report.runout.get("peak_use", {})},
                                     sort_keys=True),
+        # With a lens only: its axes after the joints, their units and calibrated ranges.
+        **({} if robot.lens is None else {"lens": json.dumps(robot.lens.describe())}),
     }
 
 
@@ -320,6 +354,10 @@ def run_warnings(analysis: Analysis) -> list[str]:
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     warnings = [*shot.warnings, *take.report.warnings]
+    if analysis.robot.lens is not None:
+        from camtraj.lens import lens_warnings
+
+        warnings += lens_warnings(analysis.robot.lens, shot)
     flip = step_warning(analysis.robot, path, shot.frames, 1.0 / shot.fps)
     if flip:
         warnings.append(flip)
@@ -399,6 +437,7 @@ def summary(
         "runout": extents(rep.runout),
         "warnings": warnings,
         "collision": analysis.collision,
+        **({} if analysis.robot.lens is None else {"lens": analysis.robot.lens.describe()}),
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }

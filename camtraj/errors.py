@@ -36,6 +36,11 @@ class RobotFileError(InputError):
     """A robot description file is missing a value, has an unknown key or a value out of range."""
 
 
+class LensFileError(InputError):
+    """A lens file (``--lens``) is missing a value, has an unknown key, a value out of range
+    or a calibration table that is not monotone."""
+
+
 class ShotFileError(InputError):
     """A USD shot cannot be read or has no usable camera animation."""
 
@@ -99,6 +104,11 @@ class UnreachableFramesError(InfeasibleError):
 
 class LimitError(InfeasibleError):
     """The timed move exceeds a velocity, acceleration or jerk limit."""
+
+
+class LensRangeError(InfeasibleError):
+    """The shot asks the lens for a focal length, focus distance or stop outside the range its
+    calibration covers (the message names the frame and the lens's end of range)."""
 
 
 class PlacementError(InfeasibleError):

@@ -173,6 +173,7 @@ def _portable(options: ConvertOptions, spell: _Paths) -> ConvertOptions:
         options,
         robot=spell(options.robot) if options.robot is not None else None,
         set_file=spell(options.set_file) if options.set_file is not None else None,
+        lens=spell(options.lens) if options.lens is not None else None,
     )
 
 
@@ -644,6 +645,7 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
         options,
         robot=os.path.normpath(base / options.robot) if options.robot is not None else None,
         set_file=os.path.normpath(base / options.set_file) if options.set_file else None,
+        lens=os.path.normpath(base / options.lens) if options.lens else None,
     )
     rig = os.path.normpath(base / task["rig_layer"]) if task.get("rig_layer") else None
     # the MCAP, the summary and the rig layer are one result: all written or none (a failed
@@ -661,7 +663,7 @@ _OPTION_TYPES: dict[str, tuple[str, int]] = {
     "camera": ("str", 0), "robot": ("path", 0), "set_file": ("path", 0),
     "placement": ("numbers", 4), "frames": ("ints", 2), "rate": ("number", 0),
     "timing": ("str", 0), "start_from": ("numbers", 8), "objective": ("str", 0),
-    "focal_length_unit": ("str", 0), "clearance": ("number", 0),
+    "focal_length_unit": ("str", 0), "clearance": ("number", 0), "lens": ("path", 0),
 }
 
 

@@ -1,11 +1,11 @@
 """The files a run reads: the shot and the USD layers it uses, the robot file, the set file,
-an MCAP, a task manifest.
+the lens file, an MCAP, a task manifest.
 
 Every command reads its inputs through this module, so two checks hold for all of them
 before any work is done: every input must be a regular file (a named pipe would block the read
 forever, a device would be read without end), and no output may be one of them
 (:meth:`camtraj.outputs.OutputSet.refuse_inputs`, given :func:`files_read`). Small text inputs
-(robot, set and manifest files) are read whole by :func:`read_text`: UTF-8, a BOM allowed.
+(robot, set, lens and manifest files) are read whole by :func:`read_text`: UTF-8, a BOM allowed.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from camtraj import interrupts
-from camtraj.errors import InputError, RobotFileError, ShotFileError, one_line
+from camtraj.errors import InputError, LensFileError, RobotFileError, ShotFileError, one_line
 from camtraj.options import ConvertOptions
 
 __all__ = [
@@ -113,7 +113,7 @@ def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) 
 
 
 def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions) -> None:
-    """The shot, robot file and set file of a run must be regular files.
+    """The shot, robot file, set file and lens file of a run must be regular files.
 
     The shot's name must also be valid UTF-8: USD takes file names as UTF-8 text.
     """
@@ -128,6 +128,8 @@ def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions)
         require_regular_file(options.robot, "robot file", RobotFileError)
     if options.set_file is not None:
         require_regular_file(options.set_file, "set file", InputError)
+    if options.lens is not None:
+        require_regular_file(options.lens, "lens file", LensFileError)
 
 
 def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
@@ -168,6 +170,8 @@ def files_read(shots: Sequence[str | os.PathLike[str]],
         inputs.append((Path(options.robot), "the robot file"))
     if options.set_file is not None:
         inputs.append((Path(options.set_file), "the set file"))
+    if options.lens is not None:
+        inputs.append((Path(options.lens), "the lens file"))
     return inputs
 
 

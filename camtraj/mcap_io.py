@@ -368,6 +368,8 @@ def _encode_trajectory(
         sec, nanosec = np.divmod(ns[a:b], _NS)
         for phase, tpl in templates.items():
             idx = np.flatnonzero(phases[a:b] == phase)
+            if not idx.size:  # no point of this window starts at this phase
+                continue
             rows = tpl.fill(
                 {
                     "positions": q[a + idx],
@@ -405,8 +407,9 @@ def _encode_shot_frames(take: TakeData, frames: slice = slice(None)) -> list[byt
     tpl = _Cdr()
     tpl.slot("frame", "<i4")
     tpl.slot("time", "<f8")
-    tpl.strings(take.joint_names)
-    tpl.slot_f64s("position", len(take.joint_names))
+    joints = take.joint_names[: len(take.joint_names) - len(take.lens_names)]
+    tpl.strings(joints)
+    tpl.slot_f64s("position", len(joints))
     tpl.slot("target", "<f8", 7)
     tpl.slot("achieved", "<f8", 7)
     tpl.slot("lens", "<f8", 3)
@@ -435,7 +438,9 @@ def _encode_camera_info(take: TakeData, frames: slice = slice(None)) -> list[byt
     # the intrinsics, not the size.
     height = int(image_heights(take.horizontal_aperture_mm[:1], take.vertical_aperture_mm[:1],
                                IMAGE_WIDTH)[0]) if len(take.frame_times) else 1
-    K = camera_matrices(take.focal_length_mm[frames], take.horizontal_aperture_mm[frames],
+    focal = (take.focal_length_mm if take.camera_focal_length_mm is None
+             else take.camera_focal_length_mm)  # with a lens: the focal length it gives
+    K = camera_matrices(focal[frames], take.horizontal_aperture_mm[frames],
                         take.vertical_aperture_mm[frames], IMAGE_WIDTH, height,
                         take.horizontal_aperture_offset_mm[frames],
                         take.vertical_aperture_offset_mm[frames])
@@ -566,11 +571,12 @@ class TakeData:
     """Everything the writer needs, as plain arrays in SI units.
 
     Attributes:
-        joint_names: Joint names in design order, length 8.
+        joint_names: Axis names in design order: the 8 joints, then any lens axes
+            (``lens_names``).
         t: Servo sample times [s] from the start of the take, shape (m,), increasing, >= 0.
-        q: Joint positions [m, rad] per servo sample, shape (m, 8).
-        qd: Joint velocities [m/s, rad/s], shape (m, 8).
-        qdd: Joint accelerations [m/s², rad/s²], shape (m, 8).
+        q: Axis positions [m, rad] per servo sample, shape (m, axes).
+        qd: Axis velocities [m/s, rad/s], shape (m, axes).
+        qdd: Axis accelerations [m/s², rad/s²], shape (m, axes).
         frame_numbers: Film frame numbers (USD time codes), shape (n,), integers.
         frame_times: Take time of each film frame [s], shape (n,), non-decreasing.
         frame_q: The IK solution per frame [m, rad], shape (n, 8).
@@ -589,6 +595,11 @@ class TakeData:
         horizontal_aperture_offset_mm, vertical_aperture_offset_mm: Lens shift per frame
             [mm] (film back off the lens axis, +x right, +y up), shape (n,); None: zeros.
             CameraInfo's principal point (cx, cy) carries it.
+        lens_names: The lens motors (``zoom``, ``focus``, ``iris``) that end ``joint_names``
+            (lens ring angles [rad] in ``q``); ``/shot/frames`` and ``/tf`` take the joints
+            before them.
+        camera_focal_length_mm: The focal length the lens gives per frame [mm], shape (n,),
+            for CameraInfo; None: ``focal_length_mm``.
     """
 
     joint_names: tuple[str, ...]
@@ -610,11 +621,18 @@ class TakeData:
     base2world: Array = field(default_factory=lambda: np.eye(4))
     horizontal_aperture_offset_mm: Array | None = None
     vertical_aperture_offset_mm: Array | None = None
+    lens_names: tuple[str, ...] = ()
+    camera_focal_length_mm: Array | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
         object.__setattr__(self, "joint_names", names)
         j = len(names)
+        lens = tuple(str(n) for n in self.lens_names)
+        object.__setattr__(self, "lens_names", lens)
+        if lens and names[j - len(lens):] != lens:
+            msg = f"TakeData.joint_names {list(names)} must end with the lens axes {list(lens)}"
+            raise ValueError(msg)
         t = self._array("t", self.t, None)
         m = t.shape[0] if t.ndim == 1 else -1
         if t.ndim != 1 or m < 1:
@@ -639,11 +657,13 @@ class TakeData:
         if np.any(np.diff(ft) < 0) or (n and (ft[0] < 0 or ft[-1] > t[-1] + 1e-9)):
             msg = "TakeData.frame_times must be non-decreasing and inside the take"
             raise ValueError(msg)
-        self._array("frame_q", self.frame_q, (n, j))
+        self._array("frame_q", self.frame_q, (n, j - len(lens)))
         self._array("target", self.target, (n, 4, 4))
         self._array("achieved", self.achieved, (n, 4, 4))
         for name in ("focal_length_mm", "focus_distance_m", "f_stop"):
             self._array(name, getattr(self, name), (n,))
+        if self.camera_focal_length_mm is not None:
+            self._array("camera_focal_length_mm", self.camera_focal_length_mm, (n,))
         for name, fallback in (("horizontal_aperture_mm", _USD_APERTURE_MM[0]),
                                ("vertical_aperture_mm", _USD_APERTURE_MM[1])):
             value = getattr(self, name)
@@ -777,10 +797,11 @@ def write_take_to(
     stream: IO[bytes], take: TakeData, robot: Robot, metadata: Mapping[str, str]
 ) -> None:
     """Write a take as a ROS 2 MCAP file into an open binary stream (see :func:`write_take`)."""
-    if tuple(take.joint_names) != tuple(robot.joint_names):
+    lens = () if robot.lens is None else robot.lens.names
+    if tuple(take.joint_names) != (*robot.joint_names, *lens) or take.lens_names != lens:
         msg = (
             f"take joint names {list(take.joint_names)} differ from the robot's "
-            f"{list(robot.joint_names)}"
+            f"{list(robot.joint_names) + list(lens)}"
         )
         raise ValueError(msg)
     for key, value in metadata.items():
@@ -855,7 +876,8 @@ def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, byt
     times = tf_times(take)
     tf_ns = seconds_to_ns(times)
     frame_ns = seconds_to_ns(take.frame_times)
-    tf_frames = [(m.parent, m.child) for m in link_transforms(robot, take.q[0])]
+    nj = len(names) - len(take.lens_names)  # the joints; a lens's motors move no link
+    tf_frames = [(m.parent, m.child) for m in link_transforms(robot, take.q[0, :nj])]
     # Window w holds the messages logged in [servo_ns[w * _WINDOW], servo_ns[(w + 1) * _WINDOW]).
     bounds = servo_ns[_WINDOW::_WINDOW]
 
@@ -872,7 +894,7 @@ def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, byt
         a, b = tf_cuts[w], tf_cuts[w + 1]
         if b > a:
             moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd,
-                                                              times[a:b]))
+                                                              times[a:b])[:, :nj])
             parts.append((tf_ns[a:b], rank[TOPIC_TF], a, _encode_tf(
                 tf_frames, tf_ns[a:b], [pose7_from_matrix(m.child2parent) for m in moving])))
         a, b = frame_cuts[w], frame_cuts[w + 1]
@@ -1141,6 +1163,7 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
     def rows(values: list[Any], width: int) -> Array:
         return np.array(values, dtype=float).reshape(len(values), width)
 
+    frame_names = _names(frames[0].name) if frames else joint_names
     return ReadTake(
         profile=header.profile,
         library=header.library,
@@ -1157,8 +1180,8 @@ def _read(path: Path, stream: IO[bytes]) -> ReadTake:
         trajectory_qdd=rows([list(p.accelerations) for p in points], n_joints),
         frame_numbers=np.array([m.frame for m in frames], dtype=np.int64),
         frame_times=np.array([m.time for m in frames], dtype=float),
-        frame_names=_names(frames[0].name) if frames else joint_names,
-        frame_q=rows([list(m.position) for m in frames], n_joints),
+        frame_names=frame_names,
+        frame_q=rows([list(m.position) for m in frames], len(frame_names)),  # no lens axes
         target=matrix_from_pose7(rows([_pose7(m.target) for m in frames], 7)),
         achieved=matrix_from_pose7(rows([_pose7(m.achieved) for m in frames], 7)),
         focal_length_mm=np.array([m.focal_length_mm for m in frames], dtype=float),

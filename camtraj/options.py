@@ -47,6 +47,8 @@ class ConvertOptions:
         edges: How the run-up and run-out move: ``"gentle"`` (per axis no more of the
             acceleration and jerk limits than the shot uses, at least a quarter of them) or
             ``"fast"`` (the full limits: the shortest, time-optimal run-up and run-out).
+        lens: A lens file (:mod:`camtraj.lens`): its zoom, focus and iris motors are timed
+            and written with the joints; default the robot file's ``[lens]``, if any.
     """
 
     camera: str | None = None
@@ -61,6 +63,7 @@ class ConvertOptions:
     focal_length_unit: str = "schema"
     clearance: float | None = None
     edges: str = "gentle"
+    lens: str | None = None
 
     def __post_init__(self) -> None:
         if self.timing not in TIMING_MODES:
@@ -193,7 +196,7 @@ def convert_options(func: F) -> F:
 
 def more_convert_options(func: F) -> F:
     """Click decorator adding ``--set-file``, ``--start-from``, ``--objective``,
-    ``--focal-length-unit``, ``--clearance`` and ``--edges``.
+    ``--focal-length-unit``, ``--clearance``, ``--edges`` and ``--lens``.
 
     The less common convert options; pass their values to :func:`build_options` too.
     """
@@ -236,6 +239,13 @@ def more_convert_options(func: F) -> F:
             show_default=True,
             help="Run-up and run-out: gentle = per axis no more acceleration and jerk than the "
             "shot uses (at least 25% of the limits); fast = the full limits (shortest).",
+        ),
+        click.option(
+            "--lens",
+            type=click.Path(exists=True, dir_okay=False),
+            metavar="LENS.toml",
+            help="Lens file: drive its zoom, focus and iris motors from the shot's lens, "
+            "timed with the joints (default: the robot file's [lens], if any).",
         ),
     ]
     for decorator in reversed(decorators):
@@ -281,6 +291,7 @@ def build_options(
     focal_length_unit: str = "schema",
     clearance: float | None = None,
     edges: str = "gentle",
+    lens: str | None = None,
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
 
@@ -301,6 +312,7 @@ def build_options(
         focal_length_unit=focal_length_unit,
         clearance=clearance,
         edges=edges,
+        lens=lens,
     )
 
 
@@ -333,6 +345,8 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--clearance", repr(float(options.clearance))))
     if options.edges != "gentle":
         pairs.append(("--edges", options.edges))
+    if options.lens is not None:
+        pairs.append(("--lens", str(options.lens)))
     return pairs
 
 

@@ -12,13 +12,16 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import InputError, RobotFileError
 from camtraj.inputs import read_text
+
+if TYPE_CHECKING:
+    from camtraj.lens import Lens
 
 Array = NDArray[np.float64]
 
@@ -131,7 +134,9 @@ class IKSettings:
 class Robot:
     """A PRRPR-S camera robot: geometry, limits, weights, mount and IK settings.
 
-    Every per-joint array has shape (8,) in joint order, SI units.
+    Every per-joint array has shape (8,) in joint order, SI units. ``lens``: the lens whose
+    motors are timed and commanded with the joints (the robot file's ``[lens]`` table, or
+    ``--lens``; :mod:`camtraj.lens`), or None.
     """
 
     name: str
@@ -149,6 +154,7 @@ class Robot:
     source: str = "builtin"
     joint_names: tuple[str, ...] = JOINT_NAMES
     joint_kinds: tuple[str, ...] = JOINT_KINDS
+    lens: Lens | None = None
 
     # -- construction -------------------------------------------------------------------
     @classmethod
@@ -251,6 +257,7 @@ class Robot:
             "max_jerk": self.max_jerk.tolist(),
             "weights": self.weights.tolist(),
             "ik_objective": self.ik.objective,
+            **({} if self.lens is None else {"lens": self.lens.describe()}),
         }
 
 
@@ -314,7 +321,7 @@ def _read_text(path: Path) -> str:
     return read_text(path, "robot file", RobotFileError)
 
 
-_TOP_KEYS = {"robot", "dh", "joints", "mount", "ik", "controller"}
+_TOP_KEYS = {"robot", "dh", "joints", "mount", "ik", "controller", "lens"}
 _JOINT_KEYS = {
     "kind", "min", "max", "max_velocity", "max_acceleration", "max_jerk", "weight", "home",
 }
@@ -429,6 +436,12 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
             sign=int(sign),
         )
 
+    lens = None
+    if "lens" in data:
+        from camtraj.lens import lens_from_table
+
+        lens = lens_from_table(_table(data, "lens", where, required=True), where=where,
+                               source=f"{source} [lens]", prefix="lens.", error=RobotFileError)
     return Robot(
         name=name,
         dh=dh,
@@ -443,6 +456,7 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         ik=ik,
         controller=controller,
         source=source,
+        lens=lens,
     )
 
 

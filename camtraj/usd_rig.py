@@ -17,7 +17,8 @@ Fixed edges carry one ``xformOp:transform``; each moving joint carries one anima
 converted film frame's time code, from the solved joints. So the camera's world pose at a time
 code is the forward kinematics of the solution at that frame, placed and converted to the
 stage's units and up axis. ``camtraj_camera`` carries the shot's lens (focal length, apertures,
-lens shift, clipping range, f-stop, focus distance), animated where the shot's lens is. The
+lens shift, clipping range, f-stop, focus distance), animated where the shot's lens is; with a
+lens file, the focal length, focus distance and f-stop the lens's motors give instead. The
 lens shift (``horizontalApertureOffset``/``verticalApertureOffset``, authored only when the
 shot has one) is the principal point offset the MCAP's CameraInfo carries.
 
@@ -142,12 +143,15 @@ def _value(v: Any) -> Any:
     return Gf.Vec2f(*map(float, v)) if np.ndim(v) else float(v)
 
 
-def _author_lens(camera: Any, shot: Shot) -> None:
+def _author_lens(camera: Any, shot: Shot, lens: dict[str, Array] | None = None) -> None:
     tenths = 1.0 / (shot.meters_per_unit * 100.0)  # mm -> tenths of a scene unit
     per_m = 1.0 / shot.meters_per_unit
     tc = shot.time_codes
     camera.CreateProjectionAttr(UsdGeom.Tokens.perspective)
-    _set_channel(camera.CreateFocalLengthAttr(), shot.focal_length_mm * tenths, tc)
+    lens = lens or {}
+    focal = lens.get("focal_length_mm", shot.focal_length_mm)
+    focus = lens.get("focus_distance_m", shot.focus_distance_m)
+    _set_channel(camera.CreateFocalLengthAttr(), focal * tenths, tc)
     _set_channel(camera.CreateHorizontalApertureAttr(), shot.horizontal_aperture_mm * tenths, tc)
     _set_channel(camera.CreateVerticalApertureAttr(), shot.vertical_aperture_mm * tenths, tc)
     for offset, create in ((shot.horizontal_aperture_offset_mm,
@@ -157,11 +161,12 @@ def _author_lens(camera: Any, shot: Shot) -> None:
         if offset is not None and np.any(offset != 0.0):
             _set_channel(create(), offset * tenths, tc)
     _set_channel(camera.CreateClippingRangeAttr(), shot.clipping_range_m * per_m, tc)
-    _set_channel(camera.CreateFStopAttr(), shot.f_stop, tc)
-    _set_channel(camera.CreateFocusDistanceAttr(), shot.focus_distance_m * per_m, tc)
+    _set_channel(camera.CreateFStopAttr(), lens.get("f_stop", shot.f_stop), tc)
+    _set_channel(camera.CreateFocusDistanceAttr(), focus * per_m, tc)
 
 
-def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: ArrayLike) -> Any:
+def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: ArrayLike,
+                    lens: dict[str, Array] | None = None) -> Any:
     """The rig layer (an anonymous ``Sdf.Layer``) for a solved shot.
 
     Args:
@@ -169,6 +174,9 @@ def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: Ar
         robot: The robot it was solved for.
         base2world: (4, 4) the placement: robot base into camtraj's converted world [m].
         frame_q: (n, 8) the IK solution at each of the shot's n frames [m, rad].
+        lens: The lens the motors give per frame (:func:`camtraj.lens.commanded_lens`:
+            ``focal_length_mm``, ``focus_distance_m``, ``f_stop``, each (n,)); None: the
+            shot's.
 
     Returns:
         The layer; see the module docstring for its contents.
@@ -213,7 +221,7 @@ def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: Ar
                 child_path = path.AppendChild(CAMERA_NAME)
                 camera = UsdGeom.Camera.Define(stage, child_path)
                 camera.AddTransformOp().Set(_in_stage_units(edge, k))
-                _author_lens(camera, shot)
+                _author_lens(camera, shot, lens)
             elif child not in tree and child not in by_frame:
                 continue  # an empty leaf frame (camera_optical): nothing to show
             else:
@@ -241,7 +249,8 @@ def _author_joint(xform: Any, axis: Any, q: Array, time_codes: Array, units_per_
 
 
 def rig_layer_bytes(
-    path: str | Path, shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: ArrayLike
+    path: str | Path, shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: ArrayLike,
+    lens: dict[str, Array] | None = None,
 ) -> bytes:
     """The rig layer (:func:`build_rig_layer`) as the file ``path`` names it: ``.usda`` is
     text, ``.usd`` and ``.usdc`` binary (crate). The caller writes the bytes (atomically,
@@ -251,7 +260,7 @@ def rig_layer_bytes(
         InputError: Not a ``.usda``/``.usd``/``.usdc`` name, or USD could not export it.
     """
     path = check_rig_path(path)
-    layer = build_rig_layer(shot, robot, base2world, frame_q)
+    layer = build_rig_layer(shot, robot, base2world, frame_q, lens)
     if path.suffix.lower() == ".usda":
         return str(layer.ExportToString()).encode("utf-8")
     with tempfile.TemporaryDirectory(prefix="camtraj-rig-") as folder:

@@ -252,13 +252,15 @@ def from_analysis(
 
     shot, robot, take, path = analysis.shot, analysis.robot, analysis.take, analysis.path
     limits = Limits.from_robot(robot)
+    if robot.lens is not None:  # the lens motors are axes of the take too
+        limits = limits.joined(robot.lens.limits())
     n = shot.frames.shape[0]
     common: dict[str, Any] = {
         "shot": str(shot_path), "camera": shot.camera_path,
         "robot": f"{robot.name} ({robot.source})", "fps": float(shot.fps),
         "placement": _placement_text(analysis.placement.describe()),
         "base2world": analysis.placement.base2world.copy(),
-        "joint_names": tuple(robot.joint_names), "revolute": limits.revolute.copy(),
+        "joint_names": tuple(limits.names), "revolute": limits.revolute.copy(),
         "lower": limits.lower.copy(), "upper": limits.upper.copy(),
         "velocity": limits.velocity.copy(), "acceleration": limits.acceleration.copy(),
         "jerk": limits.jerk.copy(), "frame_numbers": shot.frames.astype(np.int64),
@@ -363,14 +365,17 @@ def shot_timing_samples(
 
     robot, shot, path = analysis.robot, analysis.shot, analysis.path
     assert path is not None
-    real = Limits.from_robot(robot)
+    real, q_frames = Limits.from_robot(robot), path.q
+    if robot.lens is not None and analysis.lens_q is not None:
+        real = real.joined(robot.lens.limits())
+        q_frames = np.hstack([q_frames, analysis.lens_q])
     f = 1.05 / max_speed if math.isfinite(max_speed) and max_speed > 0 else 1.0
     f = max(1.0, f)
     span = real.upper - real.lower
     loose = Limits(lower=real.lower - 10 * span, upper=real.upper + 10 * span,
                    velocity=real.velocity * f, acceleration=real.acceleration * f**2,
                    jerk=real.jerk * f**3, names=real.names, kinds=real.kinds)
-    take = time_shot(path.q, shot.times, loose, mode="shot", rate=rate,
+    take = time_shot(q_frames, shot.times, loose, mode="shot", rate=rate,
                      frame_numbers=shot.frames)
     a, b = int(take.frame_samples[0]), int(take.frame_samples[-1]) + 1
     return (take.t[a:b] - take.t[a], take.q[a:b], take.qd[a:b], take.qdd[a:b],
@@ -398,12 +403,15 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
     where = f"{source}: the camtraj metadata"
     from camtraj.robot import JOINT_KINDS
 
+    lens = _lens_axes(robot_md.get("lens"), f"{where} {ROBOT_METADATA_NAME}.lens")
     n = len(take.joint_names)
-    if n != len(JOINT_KINDS) or take.point_count < 1:
+    if n != len(JOINT_KINDS) + len(lens) or take.point_count < 1:
         msg = (f"{source}: /joint_trajectory has {n} joints and {take.point_count} points; "
-               f"a camtraj take has {len(JOINT_KINDS)} joints")
+               f"a camtraj take has {len(JOINT_KINDS)} joints"
+               + (f" and {len(lens)} lens axes" if lens else ""))
         raise InputError(msg)
-    lim = {k: _numbers(robot_md.get(k), n, f"{where} {ROBOT_METADATA_NAME}.{k}")
+    lim = {k: _numbers(_joined(robot_md.get(k), lens, k), n,
+                       f"{where} {ROBOT_METADATA_NAME}.{k}")
            for k in ("lower", "upper", "max_velocity", "max_acceleration", "max_jerk")}
     if not np.all(lim["lower"] < lim["upper"]):
         msg = f"{where} {ROBOT_METADATA_NAME}: every lower limit must be below its upper"
@@ -443,7 +451,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
     from camtraj.report.samples import jerk_by_differences
 
     names = tuple(take.joint_names)
-    revolute = np.array([k == "revolute" for k in JOINT_KINDS])
+    revolute = np.array([k == "revolute" for k in JOINT_KINDS] + [True] * len(lens))
     mode = md.get("timing_mode", "?")
     poses, pose_frames, track = _tf_poses(take, float(lim["lower"][0]), float(lim["upper"][0]))
     ft = take.frame_times
@@ -477,6 +485,32 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
 
 MAX_LIMIT = 1.0e6
 """Largest velocity, acceleration or jerk limit a report takes [m or rad per s^k]."""
+
+
+def _lens_axes(text: str | None, where: str) -> dict[str, dict[str, Any]]:
+    """The lens motors recorded with the robot's limits (ring angles, after the joints)."""
+    if text is None:
+        return {}
+    try:
+        axes = json.loads(text)["axes"]
+    except (ValueError, KeyError, TypeError):
+        axes = None
+    if not isinstance(axes, dict) or not all(isinstance(v, dict) for v in axes.values()):
+        msg = f"{where} must name the lens axes and their limits"
+        raise InputError(msg)
+    return axes
+
+
+def _joined(text: str | None, lens: dict[str, dict[str, Any]], key: str) -> str | None:
+    """A robot limit's JSON list with the lens motors' values after the joints'."""
+    if not lens or text is None:
+        return text
+    try:
+        values = json.loads(text)
+    except ValueError:
+        return text
+    extra = [axis.get(key) for axis in lens.values()]
+    return json.dumps(values + extra) if isinstance(values, list) else text
 
 
 def _numbers(text: str | None, n: int, where: str) -> Array:
@@ -518,7 +552,7 @@ def _margins_ok(m: Any) -> bool:
         return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
     return (isinstance(m, dict)
-            and all(isinstance(m.get(k), dict) and len(m[k]) == 8
+            and all(isinstance(m.get(k), dict) and len(m[k]) == 8  # the joints: no lens
                     and all(number(v) for v in m[k].values())
                     for k in ("to_limits", "to_limits_frame"))
             and all(number(m.get(k)) for k in ("wrist_singularity_deg", "wrist_singularity_frame",

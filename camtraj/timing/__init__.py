@@ -1,7 +1,8 @@
 """Timing stage: the joint path of every film frame to a timed take at the servo rate.
 
 Input is the inverse-kinematics solution of every film frame (``q_frames``, shape (n, 8),
-[m, rad]) at uniformly spaced ``frame_times`` [s]. Output is a :class:`Take`: position,
+[m, rad]; a lens adds its zoom, focus and iris motors as more columns, with their own limits)
+at uniformly spaced ``frame_times`` [s]. Output is a :class:`Take`: position,
 velocity, acceleration and jerk of every axis at every servo sample, from rest to rest.
 
 The stages inside :func:`time_shot`, one module each:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.timing.limits import LIMIT_RTOL, N_AXES, Limits, TimingLimitError, fmt
+from camtraj.timing.limits import LIMIT_RTOL, Limits, TimingLimitError, fmt
 
 Array = NDArray[np.float64]
 
@@ -33,7 +33,7 @@ GENTLE_FLOOR = 0.25
 
 @dataclass(frozen=True, eq=False)
 class Edge:
-    """Samples of a run-up or run-out (each (k, 8)) and its report."""
+    """Samples of a run-up or run-out (each (k, axes)) and its report."""
 
     q: Array
     qd: Array
@@ -61,7 +61,8 @@ class _Move:
             Trajectory,
         )
 
-        inp = InputParameter(N_AXES)
+        dofs = limits.size
+        inp = InputParameter(dofs)
         if stop:  # brake each axis as hard as it can: the shortest stop, wherever it ends
             inp.control_interface = ControlInterface.Velocity
             inp.synchronization = Synchronization.No
@@ -72,9 +73,9 @@ class _Move:
         inp.max_velocity = [float(x) for x in limits.velocity]
         inp.max_acceleration = [float(x) for x in limits.acceleration]
         inp.max_jerk = [float(x) for x in limits.jerk]
-        traj = Trajectory(N_AXES)
+        traj = Trajectory(dofs)
         try:
-            result = Ruckig(N_AXES).calculate(inp, traj)
+            result = Ruckig(dofs).calculate(inp, traj)
         except RuntimeError as exc:  # ruckig raises on invalid input
             msg = f"ruckig could not plan {what}: {exc}"
             raise TimingLimitError(msg) from exc
@@ -97,18 +98,18 @@ class _Move:
         self.max = np.maximum(ranges[:, 1], self.rest_position)
 
     def sample(self, times: Array) -> tuple[Array, Array, Array, Array]:
-        """Position, velocity, acceleration and jerk at move times, each (k, 8).
+        """Position, velocity, acceleration and jerk at move times, each (k, axes).
 
         Evaluated exactly from ruckig's per-axis phases (constant jerk in each), all samples
         at once; the jerk is that of the phase just after the sample time. Beyond the move's
         rest end (after a stop, before a start) the state is exactly rest at the rest
         position; an axis that has finished its own profile holds its final state.
         """
-        k = times.size
-        p = np.empty((k, N_AXES))
-        v = np.empty((k, N_AXES))
-        a = np.empty((k, N_AXES))
-        j = np.empty((k, N_AXES))
+        shape = (times.size, len(self._phases))
+        p = np.empty(shape)
+        v = np.empty(shape)
+        a = np.empty(shape)
+        j = np.empty(shape)
         tm = np.clip(times, 0.0, self.duration)
         for axis, (seg, start, final) in enumerate(self._phases):
             end = start[-1] + seg[-1, 4]
@@ -146,7 +147,7 @@ def _phases(profile: Any) -> tuple[Array, Array, tuple[float, float, float]]:
 
 def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
     """The shortest jerk-limited stop from the state (p, v, a), per axis (not synchronised)."""
-    zero = np.zeros(N_AXES)
+    zero = np.zeros(limits.size)
     return _Move((p, v, a), (p, zero, zero), limits, stop=True,
                  what="a stop from the shot's boundary state")
 
@@ -221,7 +222,7 @@ def _at_rest(v: Array, a: Array, limits: Limits) -> bool:
 
 
 def _empty_edge(p: Array, limits: Limits, key: str) -> Edge:
-    empty = np.zeros((0, N_AXES))
+    empty = np.zeros((0, limits.size))
     report = {
         "duration": 0.0, "hold": 0.0, "samples": 0,
         key: {name: float(p[j]) for j, name in enumerate(limits.names)},
@@ -327,7 +328,7 @@ def edge_problem(
             if start is None:
                 move = _stop_move(p, -v, a, limits)
             else:
-                zero = np.zeros(N_AXES)
+                zero = np.zeros(limits.size)
                 move = _Move((start, zero, zero), (p, v, a), limits, stop=False,
                              what="the run-up from the start position")
         except TimingLimitError as exc:
@@ -380,12 +381,12 @@ def runup_from(
     All axes arrive together (ruckig's position interface, time-synchronised). Held at rest
     at ``start`` before it so that the first frame lands on a servo tick.
     """
-    if start.shape != (N_AXES,) or not np.all(np.isfinite(start)):
-        msg = f"start must be {N_AXES} finite joint values, got {start.tolist()}"
+    if start.shape != (limits.size,) or not np.all(np.isfinite(start)):
+        msg = f"start must be {limits.size} finite axis values, got {start.tolist()}"
         raise ValueError(msg)
     if np.array_equal(start, p) and _at_rest(v, a, limits):
         return _empty_edge(p, limits, "start")
-    zero = np.zeros(N_AXES)
+    zero = np.zeros(limits.size)
     move = _Move((start, zero, zero), (p, v, a), limits, stop=False,
                  what="the run-up from the start position")
     _edge_position_check(move, limits, "run-up", frame)

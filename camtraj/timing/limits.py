@@ -21,14 +21,15 @@ IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
 QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
-N_AXES = 8
 #: Relative tolerance of the limit checks in "shot" and "scale" modes (float round-off only).
 LIMIT_RTOL = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
 class Limits:
-    """Per-axis limits, every array of shape (8,) in joint order, SI units.
+    """Per-axis limits, every array of shape (k,) in axis order, SI units: the robot's eight
+    joints (the default names), followed by any more axes timed with them (a lens's zoom,
+    focus and iris motors, :meth:`joined`). Timing treats every axis alike.
 
     Attributes:
         lower: Lower position limits [m or rad].
@@ -49,10 +50,11 @@ class Limits:
     kinds: tuple[str, ...] = JOINT_KINDS
 
     def __post_init__(self) -> None:
+        k = len(self.names)
         for name in ("lower", "upper", "velocity", "acceleration", "jerk"):
             arr = np.array(getattr(self, name), dtype=np.float64)
-            if arr.shape != (N_AXES,) or not np.all(np.isfinite(arr)):
-                msg = f"limits.{name} must be {N_AXES} finite numbers, got shape {arr.shape}"
+            if k < 1 or arr.shape != (k,) or not np.all(np.isfinite(arr)):
+                msg = f"limits.{name} must be {k} finite numbers, got shape {arr.shape}"
                 raise ValueError(msg)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -63,8 +65,8 @@ class Limits:
         if np.any(self.lower >= self.upper):
             msg = "limits.lower must be below limits.upper on every axis"
             raise ValueError(msg)
-        if len(self.names) != N_AXES or len(self.kinds) != N_AXES:
-            msg = f"limits need {N_AXES} axis names and kinds"
+        if len(self.kinds) != k or len(set(self.names)) != k:
+            msg = f"limits need {k} distinct axis names and {k} kinds"
             raise ValueError(msg)
         if any(k not in ("prismatic", "revolute") for k in self.kinds):
             msg = f"limits.kinds must be 'prismatic' or 'revolute', got {self.kinds}"
@@ -84,12 +86,26 @@ class Limits:
         )
 
     @property
+    def size(self) -> int:
+        """The number of axes."""
+        return len(self.names)
+
+    def joined(self, more: Limits) -> Limits:
+        """These axes followed by ``more``'s."""
+        def both(key: str) -> Array:
+            return np.concatenate([getattr(self, key), getattr(more, key)])
+
+        return Limits(both("lower"), both("upper"), both("velocity"), both("acceleration"),
+                      both("jerk"), names=(*self.names, *more.names),
+                      kinds=(*self.kinds, *more.kinds))
+
+    @property
     def revolute(self) -> BoolArray:
-        """Whether each axis is revolute, shape (8,)."""
+        """Whether each axis is revolute, shape (k,)."""
         return np.array([k == "revolute" for k in self.kinds])
 
     def bound(self, quantity: str) -> Array:
-        """The symmetric limit of ``"velocity"``, ``"acceleration"`` or ``"jerk"``, shape (8,)."""
+        """The symmetric limit of ``"velocity"``, ``"acceleration"`` or ``"jerk"``, shape (k,)."""
         return {"velocity": self.velocity, "acceleration": self.acceleration,
                 "jerk": self.jerk}[quantity]
 

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.timing.limits import LIMIT_RTOL, N_AXES, Limits, slowdown
+from camtraj.timing.limits import LIMIT_RTOL, Limits, slowdown
 from camtraj.timing.path import FramePath, Samples, runs
 
 Array = NDArray[np.float64]
@@ -428,7 +428,7 @@ class _Rows:
         at = np.flatnonzero(cap < SPEED_RANGE[1] ** 2)
         add(basis[0][at].multiply(1.0 / cap[at][:, None]), at, False)
         moving = (np.abs(p1) + np.abs(p2) + np.abs(p3)) > 0
-        for ax in range(N_AXES):
+        for ax in range(limits.size):
             at = np.flatnonzero(moving[:, ax])
             if at.size == 0:
                 continue

@@ -26,7 +26,6 @@ from camtraj.timing.edges import (
 )
 from camtraj.timing.limits import (
     LIMIT_RTOL,
-    N_AXES,
     FrameMap,
     Limits,
     LimitViolation,
@@ -107,10 +106,10 @@ class Take:
 
     Attributes:
         t: Sample times [s], shape (m,), ``t[0] = 0`` (the take starts at rest).
-        q: Positions [m, rad], shape (m, 8).
-        qd: Velocities [m/s, rad/s], shape (m, 8).
-        qdd: Accelerations [m/s², rad/s²], shape (m, 8).
-        qddd: Jerks [m/s³, rad/s³], shape (m, 8). Exact values for the spline and ruckig
+        q: Positions [m, rad], shape (m, k).
+        qd: Velocities [m/s, rad/s], shape (m, k).
+        qdd: Accelerations [m/s², rad/s²], shape (m, k).
+        qddd: Jerks [m/s³, rad/s³], shape (m, k). Exact values for the spline and ruckig
             parts (in an ``"optimal"`` retime, of the path under its time law).
         frame_times: Time of each film frame in the take [s], shape (n,) (after run-up, after
             any retime); ``t[frame_samples] == frame_times`` exactly.
@@ -169,7 +168,8 @@ def time_shot(
     """Time a joint path for the robot: from rest, through every film frame, to rest.
 
     Args:
-        q_frames: Joint solution of every film frame [m, rad], shape (n, 8), n >= 2.
+        q_frames: Joint solution of every film frame [m, rad], shape (n, k), n >= 2, k the
+            axes of ``limits`` (the eight joints, then any lens axes).
         frame_times: Time of every film frame in the shot [s], shape (n,), uniformly spaced
             (1/fps apart); only the spacing is used.
         limits: The robot's limits.
@@ -183,7 +183,7 @@ def time_shot(
         rate: Requested servo rate [Hz].
         frame_numbers: Film frame number of every frame, shape (n,) (default 0..n-1); used in
             messages and reports.
-        start: Joint vector the robot stands at when the take begins [m, rad], shape (8,);
+        start: Joint vector the robot stands at when the take begins [m, rad], shape (k,);
             the run-up moves from it (at rest) into the first frame's state. Default: the
             take begins at rest wherever the shortest run-up into the first frame starts.
         hold: Per frame pair, shape (n - 1,): whether the camera holds still there. A pair
@@ -204,14 +204,14 @@ def time_shot(
             run-out that could not stay under a velocity limit) or a position limit is
             crossed (every mode, including by the run-up or run-out).
     """
-    q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate)
+    q, dt, frames = _validate(q_frames, frame_times, frame_numbers, mode, rate, limits)
     n = q.shape[0]
     fps = 1.0 / dt
     hold_mask = _validate_hold(hold, n)
     if edges not in EDGE_MODES:
         msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
         raise ValueError(msg)
-    start_q = None if start is None else _validate_start(start)
+    start_q = None if start is None else _validate_start(start, limits.size)
     real = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames)
     edge_note = []
     if real.edges != edges:
@@ -382,7 +382,7 @@ def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, 
     ``TimingReport.max_speed``, the same computation), without timing a take: 0 where a
     position limit is crossed at the shot's own timing (no speed fixes that) or no slower
     take fits the run-up and run-out; inf where nothing moves."""
-    q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate)
+    q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate, limits)
     rt = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
                       frames)
     if any(v.quantity == "position" for v in
@@ -397,11 +397,12 @@ def _validate(
     frame_numbers: ArrayLike | None,
     mode: str,
     rate: float,
+    limits: Limits,
 ) -> tuple[Array, float, IntArray]:
     q = np.array(q_frames, dtype=np.float64)
     times = np.array(frame_times, dtype=np.float64)
-    if q.ndim != 2 or q.shape[1] != N_AXES:
-        msg = f"q_frames must have shape (n, {N_AXES}), got {q.shape}"
+    if q.ndim != 2 or q.shape[1] != limits.size:
+        msg = f"q_frames must have shape (n, {limits.size}) to match the limits, got {q.shape}"
         raise ValueError(msg)
     n = q.shape[0]
     if n < 2:
@@ -468,10 +469,10 @@ def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
     return mask
 
 
-def _validate_start(start: ArrayLike) -> Array:
+def _validate_start(start: ArrayLike, axes: int) -> Array:
     arr = np.array(start, dtype=np.float64)
-    if arr.shape != (N_AXES,) or not np.all(np.isfinite(arr)):
-        msg = f"start must be {N_AXES} finite joint values, got {arr.tolist()}"
+    if arr.shape != (axes,) or not np.all(np.isfinite(arr)):
+        msg = f"start must be {axes} finite axis values, got {arr.tolist()}"
         raise ValueError(msg)
     return arr
 
