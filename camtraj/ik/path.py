@@ -13,7 +13,7 @@ from threadpoolctl import threadpool_limits
 from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
-from camtraj.ik.refine import REFINE_STAGES, refine
+from camtraj.ik.refine import REFINE_STAGES, Refinement
 from camtraj.ik.shot import Candidates, candidates, choose, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
@@ -196,8 +196,9 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     The dynamic programme chooses by frame-to-frame differences, a proxy for the take's
     speed, so the refinement starts from two of its answers: on the robot file's candidate
     grid and on the grid with half the track values (a different set of points, so another
-    basin where the proxy misleads). The faster take, as the timing stage measures it, wins.
-    ``progress`` is called after each step (a start's programme, each refinement stage) with
+    basin where the proxy misleads). Both run the continuation's first stage, which settles
+    the basin; the faster take, as the timing stage measures it, runs the remaining stages.
+    ``progress`` is called after each step (a start's programme, a refinement stage) with
     that step's share of the n frames (the shares add up to n).
     """
     s = robot.ik
@@ -206,13 +207,12 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     limits = Limits.from_robot(robot)
     times = np.arange(n) * dt
 
-    def take_speed(q: Array) -> float:
-        return feasible_speed(q, times, limits) if n > 1 else math.inf
+    def take_speed(q: Array) -> float:  # to compare answers: a thousandth is plenty
+        return feasible_speed(q, times, limits, precision=1e-3) if n > 1 else math.inf
 
-    best: tuple[float, Array] | None = None
     grids = dict.fromkeys([(s.track_samples, s.extend_samples),
                            (max(1, s.track_samples // 2), s.extend_samples)])
-    total = len(grids) * (1 + REFINE_STAGES)
+    total = 2 * len(grids) + REFINE_STAGES - 1
     done = [0]
 
     def step() -> None:
@@ -220,6 +220,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
             progress(round(n * (done[0] + 1) / total) - round(n * done[0] / total))
         done[0] += 1
 
+    runs = []
     for n_track, n_extend in grids:
         cand = candidates(robot, targets, n_track, n_extend)
         cand = _rescue_empty_frames(robot, targets, cand, frames)
@@ -232,14 +233,18 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
         j = cand.interval[rows, choice.point]
         lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
-        ref = refine(robot, cost, targets, choice.branch, x0, choice.y,
-                     np.minimum(lo1, x0[:, 0]), np.maximum(hi1, x0[:, 0]),
-                     rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                     take_speed=take_speed, on_stage=step)
-        if best is None or ref.speed > best[0]:
-            best = (ref.speed, ref.y[:, :8])
-    assert best is not None
-    return best[1]
+        run = Refinement(robot, cost, targets, choice.branch, x0, choice.y,
+                         np.minimum(lo1, x0[:, 0]), np.maximum(hi1, x0[:, 0]),
+                         rounds=s.refine_rounds, tolerance=s.refine_tolerance,
+                         take_speed=take_speed)
+        run.stage()
+        step()
+        runs.append(run)
+    best = max(runs, key=lambda r: r.best[0])  # the first on a tie
+    for _ in range(REFINE_STAGES - 1):
+        best.stage()
+        step()
+    return best.result().y[:, :8]
 
 
 def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,
