@@ -22,6 +22,10 @@ from camtraj.timing import Limits, feasible_speed
 
 Array = NDArray[np.float64]
 
+#: Starts whose take after the first refinement stage is within this share of the fastest
+#: one's all run the remaining stages.
+CLOSE_STARTS = 0.01
+
 OBJECTIVES = ("shot", "paper")
 
 
@@ -197,7 +201,9 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     speed, so the refinement starts from two of its answers: on the robot file's candidate
     grid and on the grid with half the track values (a different set of points, so another
     basin where the proxy misleads). Both run the continuation's first stage, which settles
-    the basin; the faster take, as the timing stage measures it, runs the remaining stages.
+    the basin; the faster take, as the timing stage measures it, runs the remaining stages
+    (both do when they are within :data:`CLOSE_STARTS` of each other), and the fastest
+    answer wins.
     ``progress`` is called after each step (a start's programme, a refinement stage) with
     that step's share of the n frames (the shares add up to n).
     """
@@ -240,11 +246,15 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         run.stage()
         step()
         runs.append(run)
-    best = max(runs, key=lambda r: r.best[0])  # the first on a tie
+    # the starts within a hundredth of the fastest all go on (a near tie after one stage
+    # says little about which basin is better)
+    top = max(r.best[0] for r in runs)
+    going = [r for r in runs if r.best[0] >= (1.0 - CLOSE_STARTS) * top]
     for _ in range(REFINE_STAGES - 1):
-        best.stage()
+        for r in going:
+            r.stage()
         step()
-    return best.result().y[:, :8]
+    return max((r.result() for r in going), key=lambda ref: ref.speed).y[:, :8]
 
 
 def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,
