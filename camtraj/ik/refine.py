@@ -97,6 +97,7 @@ class Refinement:
         self.x, self.y = x0.copy(), y0.copy()
         self.stages_done = 0
         self.taken = 0
+        self.mu = 1e-3  # the damping, carried from stage to stage
         self.corridor = _Corridor(robot, targets, lo1, hi1) if x0.shape[0] >= 2 else None
         # the start and every stage's answer by the timing stage (which also sees what the
         # objective's model leaves out: gentle ends, the room they need): the fastest wins
@@ -112,9 +113,9 @@ class Refinement:
         if self.corridor is None:
             return
         stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
-        self.x, self.y, steps = _descend(self.robot, stage, self.corridor, self.targets,
-                                         self.branch, self.x, self.y, self.rounds,
-                                         self.tolerance)
+        self.x, self.y, steps, self.mu = _descend(self.robot, stage, self.corridor,
+                                                  self.targets, self.branch, self.x, self.y,
+                                                  self.rounds, self.tolerance, self.mu)
         self.taken += steps
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
@@ -140,13 +141,13 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
 
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
-             branch: IntArray, x: Array, y: Array, rounds: int,
-             tolerance: float) -> tuple[Array, Array, int]:
-    """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged."""
+             branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
+             mu: float) -> tuple[Array, Array, int, float]:
+    """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
+    from damping ``mu``: the curves, the steps taken and the damping reached."""
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
     j = cost.refine_total(y)
-    mu = 1e-3
     taken = 0
     slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
     for _ in range(rounds):
@@ -178,7 +179,7 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
         slow = slow + 1 if rel < tolerance else 0
         if slow >= 3:
             break
-    return x, y, taken
+    return x, y, taken, mu
 
 
 def _try_step(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
