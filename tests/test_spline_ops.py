@@ -41,12 +41,15 @@ def test_operators_give_the_timing_stages_spline(robot: Robot, n: int) -> None:
     path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper)
     knots = np.arange(n, dtype=float)
     mids = np.arange(n - 1) + 0.5
-    for op in spline_ops(n):
-        x = knots if op.coef.shape[0] == n else mids
-        want = path.at(x, 3)[op.order]
-        got = op.apply(q)
+    ops = spline_ops(n)
+    values = ops.apply(q)
+    for i, (order, rows) in enumerate(zip(ops.orders, ops.rows, strict=True)):
+        x = knots if rows == n else mids
+        want = path.at(x, 3)[order]
+        got = values[:rows, :, i]
         scale = np.abs(want).max(axis=0)
-        assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (op.order, n)
+        assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (order, n)
+        assert not values[rows:, :, i].any()
 
 
 def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) -> None:

@@ -27,7 +27,7 @@ from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
 from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, margin_peak
-from camtraj.ik.spline_ops import BandOp
+from camtraj.ik.spline_ops import BandOps
 from camtraj.robot import Robot
 
 Array = NDArray[np.float64]
@@ -65,21 +65,18 @@ class _Corridor:
         return np.stack([r1, r4], axis=1)
 
 
-def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
-           y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
-           tolerance: float = 1e-4,
-           take_speed: Callable[[Array], float] | None = None,
-           on_stage: Callable[[], None] | None = None) -> Refined:
-    """Lower the take's peak use from the start curves x0 (n, 2), measures y0 (n, 10).
+class Refinement:
+    """The refinement of one start, run stage by stage (:func:`refine` runs every stage).
 
     A continuation over the power of :meth:`ShotCost.refine_total`'s peak norm (6, 12, 24,
     48): each stage starts from the last one's answer with the scale set to its peak use,
     and runs damped Gauss-Newton steps until three steps in a row lower the stage's objective
-    by less than ``tolerance`` (relative), no step lowers it, or after ``rounds`` steps.
+    by less than ``tolerance`` (relative), no step lowers it, or after ``rounds`` steps. The
+    start and every stage's answer are measured with ``take_speed`` and the fastest is kept.
 
     Args:
         robot: The robot.
-        cost: The objective (its ``power`` and ``scale`` are set here).
+        cost: The objective (its ``power`` and ``scale`` are set per stage).
         targets: Flange poses (n, 4, 4) [m].
         branch: Closed-form branch per frame (n,).
         x0: Start track/extend per frame (n, 2) [m], feasible.
@@ -88,45 +85,69 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
         rounds: Most Gauss-Newton steps per stage.
         tolerance: Relative decrease below which a stage has converged.
         take_speed: The maximum feasible speed of a joint path (n, 8) as the timing stage
-            finds it; the start and every stage's answer are measured with it and the fastest
-            is returned (default: ``1 / cost.peak``, the objective's own model).
-        on_stage: Called after each stage (for progress).
+            finds it (default: ``1 / cost.peak``, the objective's own model).
     """
-    n = x0.shape[0]
-    x, y = x0.copy(), y0.copy()
-    final = replace(cost, power=_POWERS[-1], scale=max(cost.peak(y[:, :8]), 1e-6))
-    if n < 2:
-        for _ in range(REFINE_STAGES if on_stage is not None else 0):
-            on_stage()  # type: ignore[misc]
-        return Refined(x, y, final.refine_total(y), 0, math.inf)
-    corridor = _Corridor(robot, targets, lo1, hi1)
-    taken = 0
-    # the start and every stage's answer by the timing stage (which also sees what the
-    # objective's model leaves out: gentle ends, the room they need): the fastest wins
-    speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
-    best = (speed(y[:, :8]), x, y)
-    for power in _POWERS:
-        stage = replace(cost, power=power, scale=max(cost.peak(y[:, :8]), 1e-6))
-        x, y, steps = _descend(robot, stage, corridor, targets, branch, x, y, rounds,
-                               tolerance)
-        taken += steps
-        v = speed(y[:, :8])
-        if v >= best[0]:
-            best = (v, x, y)
-        if on_stage is not None:
-            on_stage()
-    v, x, y = best
-    return Refined(x.copy(), y.copy(), final.refine_total(y), taken, v)
+
+    def __init__(self, robot: Robot, cost: ShotCost, targets: Array, branch: IntArray,
+                 x0: Array, y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
+                 tolerance: float = 1e-4,
+                 take_speed: Callable[[Array], float] | None = None) -> None:
+        self.robot, self.cost, self.targets, self.branch = robot, cost, targets, branch
+        self.rounds, self.tolerance = rounds, tolerance
+        self.x, self.y = x0.copy(), y0.copy()
+        self.stages_done = 0
+        self.taken = 0
+        self.mu = 1e-3  # the damping, carried from stage to stage
+        self.corridor = _Corridor(robot, targets, lo1, hi1) if x0.shape[0] >= 2 else None
+        # the start and every stage's answer by the timing stage (which also sees what the
+        # objective's model leaves out: gentle ends, the room they need): the fastest wins
+        self.speed = take_speed or (lambda q: 1.0 / max(cost.peak(q), 1e-300))
+        self.best = (self.speed(self.y[:, :8]) if self.corridor else math.inf, self.x, self.y)
+
+    def stage(self) -> None:
+        """Run the next stage of the continuation (nothing once all have run)."""
+        if self.stages_done >= REFINE_STAGES:
+            return
+        power = _POWERS[self.stages_done]
+        self.stages_done += 1
+        if self.corridor is None:
+            return
+        stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
+        self.x, self.y, steps, self.mu = _descend(self.robot, stage, self.corridor,
+                                                  self.targets, self.branch, self.x, self.y,
+                                                  self.rounds, self.tolerance, self.mu)
+        self.taken += steps
+        v = self.speed(self.y[:, :8])
+        if v >= self.best[0]:
+            self.best = (v, self.x, self.y)
+
+    def result(self) -> Refined:
+        """The fastest answer so far."""
+        v, x, y = self.best
+        final = replace(self.cost, power=_POWERS[-1], scale=max(self.cost.peak(y[:, :8]), 1e-6))
+        return Refined(x.copy(), y.copy(), final.refine_total(y), self.taken, v)
+
+
+def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
+           y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
+           tolerance: float = 1e-4,
+           take_speed: Callable[[Array], float] | None = None) -> Refined:
+    """Every stage of a :class:`Refinement` (the same arguments): the fastest answer."""
+    run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1, rounds, tolerance,
+                     take_speed)
+    for _ in _POWERS:
+        run.stage()
+    return run.result()
 
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
-             branch: IntArray, x: Array, y: Array, rounds: int,
-             tolerance: float) -> tuple[Array, Array, int]:
-    """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged."""
+             branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
+             mu: float) -> tuple[Array, Array, int, float]:
+    """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
+    from damping ``mu``: the curves, the steps taken and the damping reached."""
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
     j = cost.refine_total(y)
-    mu = 1e-3
     taken = 0
     slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
     for _ in range(rounds):
@@ -158,7 +179,7 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
         slow = slow + 1 if rel < tolerance else 0
         if slow >= 3:
             break
-    return x, y, taken
+    return x, y, taken, mu
 
 
 def _try_step(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
@@ -222,28 +243,27 @@ def _normal_equations(cost: ShotCost, y: Array,
     q, G = y[:, :8], grad_y[:, :8, :]
     p, s = cost.power, cost.scale
     use = cost.take_use(q)
-    usages = use.usages
-    width = max(op.coef.shape[1] for op, _ in usages)
+    ops = use.ops
+    width = ops.coef.shape[1]
     pad = width  # frames of padding on either side of the gathered arrays
     M = np.zeros((width, n + 2 * pad, 8))  # M[d, pad + f]: curvature coupling f and f + d
     gq = np.zeros((n + 2 * pad, 8))
     phi = use.power_sum(p, s)
     kappa = (s / p) * max(phi, 1e-300) ** (1.0 / p - 1.0)
-    lims = (cost.vel, cost.acc, cost.jerk)
-    for op, z in usages:
-        ex = p / op.order
-        c = s ** op.order
-        a = np.abs(z) / c
-        lim = lims[op.order - 1]
-        dz = kappa * ex * a ** (ex - 1.0) * np.sign(z) / (c * lim)
-        w = kappa * ex * (ex - 1.0) * a ** (ex - 2.0) / (c * c * lim * lim)
-        _gather(op, dz, w, gq, M, pad)
+    order = np.asarray(ops.orders, dtype=float)
+    ex = p / order
+    c = s ** order
+    lim = np.stack([(cost.vel, cost.acc, cost.jerk)[k - 1] for k in ops.orders], axis=-1)
+    a = np.abs(use.z) / c
+    dz = kappa * ex * a ** (ex - 1.0) * np.sign(use.z) / (c * lim)
+    w = kappa * ex * (ex - 1.0) * a ** (ex - 2.0) / (c * c * lim * lim)
+    _gather(ops, dz, w, gq, M, pad)
     if use.ends is not None:  # the ends' stopping needs: one row per end and axis
         need, d1, d2, rows = use.ends
         a = need / s
         f1 = kappa * p * a ** (p - 1.0) / s
         f2 = kappa * p * (p - 1.0) * a ** (p - 2.0) / (s * s)
-        off = usages[0][0].offset
+        off = ops.offset
         for end, row in ((0, 0), (1, n - 1)):
             # d need / d q[f] per axis: (width, 8)
             lin = (rows[end, 0][:, None] * (d1[end] / cost.vel)
@@ -261,7 +281,8 @@ def _normal_equations(cost: ShotCost, y: Array,
         t = cost.tie_break / m
         dz = t * cost.motion_coef * np.sign(z) / cost.vel
         w = t * cost.motion_coef / np.maximum(np.abs(z), 0.05) / (cost.vel * cost.vel)
-        _gather(BandOp(1, np.tile([-1.0, 1.0], (m, 1)), 0, (0, m)), dz, w, gq, M, pad)
+        step_op = BandOps((1,), (m,), np.tile([[[-1.0], [1.0]]], (m, 1, 1)), 0, (0, m))
+        _gather(step_op, dz[..., None], w[..., None], gq, M, pad)
     g = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
     # H[k, d] = sum_i M[d, k, i] G[k, i]^T G[k + d, i]: frame k with frame k + d
     g_pad = np.concatenate([G, np.zeros((width, 8, 2))])
@@ -304,46 +325,39 @@ def _normal_equations(cost: ShotCost, y: Array,
     return H, g, g_peak, concave
 
 
-def _gather(op: BandOp, dz: Array, w: Array, gq: Array, M: Array, pad: int) -> None:
-    """Add one operator's terms to the joint-space gradient ``gq`` and curvature ``M``.
+def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) -> None:
+    """Add the operators' terms to the joint-space gradient ``gq`` and curvature ``M``.
 
-    Row r of the operator reads frames r + offset + o with weights coef[r, o]; its gradient
-    in its value is dz[r] (rows, 8), its Gauss-Newton curvature w[r]: frame f gets
-    sum coef[r, f - r - offset] dz[r], and the pair (f, f + d) sum coef[r, o] coef[r, o + d]
-    w[r]. The shift-invariant rows are correlations, one matrix product each; the rows near
-    the ends are added weight by weight.
+    Row r of operator i reads frames r + offset + o with weights coef[r, o, i]; its gradient
+    in its value is dz[r, :, i] (rows, 8, k), its Gauss-Newton curvature w[r, :, i]: frame f
+    gets sum coef[r, f - r - offset, i] dz[r, :, i], and the pair (f, f + d)
+    sum coef[r, o, i] coef[r, o + d, i] w[r, :, i]. The shift-invariant rows are
+    correlations, one matrix product per kernel tap; the rows near the ends are added as
+    dense blocks.
     """
-    coef = op.coef
-    rows, width = coef.shape
-    base = pad + op.offset
-    a, b = op.inner
+    coef = ops.coef
+    rows, width, _ = coef.shape
+    base = pad + ops.offset
+    a, b = ops.inner
     if b > a:
-        kernel = coef[a]
-        rev = kernel[::-1]
-        # pairs: K[j, d] = k[o] k[o + d] with o = width - 1 - j
-        pairs = np.zeros((width, width))
-        for d in range(width):
-            pairs[d:, d] = rev[d:] * rev[:width - d]
-        size = b - a + width - 1
-        for src, dst, weights in ((dz, gq, rev[:, None]), (w, M, pairs)):
-            padded = np.zeros((size + width - 1, 8))
-            padded[width - 1:width - 1 + b - a] = src[a:b]
-            win = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)[:size]
-            out = win @ weights  # (size, 8, 1 or D): frame base + a + u
-            if dst is gq:
-                gq[base + a:base + a + size] += out[..., 0]
-            else:
-                M[:width, base + a:base + a + size] += out.transpose(2, 0, 1)
+        kern = coef[a]  # (width, k)
+        for o in range(width):
+            lo = base + a + o
+            gq[lo:lo + b - a] += dz[a:b] @ kern[o]
+            pairs = (kern[o] * kern[o:]).T  # (k, width - o): taps o and o + d
+            M[:width - o, lo:lo + b - a] += (w[a:b] @ pairs).transpose(2, 0, 1)
     for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
         if hi <= lo:
             continue
-        # rows lo..hi read frames lo + offset .. hi - 1 + offset + width - 1: as a dense
-        # (rows, frames) matrix C, they add C^T dz and C^T diag(w) C (per axis)
-        c = _dense_rows(op, lo, hi)
+        # rows lo..hi read frames lo + offset .. hi - 1 + offset + width - 1: as dense
+        # (k, rows, frames) matrices C, they add C^T dz and C^T diag(w) C (per axis)
+        c = _dense_rows(coef[lo:hi])
         f0 = base + lo
-        span = c.shape[1]
-        gq[f0:f0 + span] += c.T @ dz[lo:hi]
-        full = (c.T[None] * w[lo:hi].T[:, None, :]) @ c  # (8, span, span)
+        span = c.shape[2]
+        ct = c.transpose(0, 2, 1)  # (k, frames, rows)
+        gq[f0:f0 + span] += (ct @ dz[lo:hi].transpose(2, 0, 1)).sum(axis=0)
+        weighted = ct[:, None] * w[lo:hi].transpose(2, 1, 0)[:, :, None, :]  # (k, 8, s, r)
+        full = (weighted @ c[:, None]).sum(axis=0)  # (8, span, span)
         at, dist = _upper_pairs(span, width)
         M[dist, f0 + at] += full[:, at, at + dist].T  # each (frame, distance) pair once
 
@@ -356,14 +370,13 @@ def _upper_pairs(span: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.in
     return f[keep], d[keep]
 
 
-def _dense_rows(op: BandOp, lo: int, hi: int) -> Array:
-    """Rows lo..hi of an operator as a dense (hi - lo, hi - lo + width - 1) matrix whose
-    column k is frame lo + offset + k."""
-    rows = hi - lo
-    width = op.coef.shape[1]
-    out = np.zeros((rows, rows + width - 1))
+def _dense_rows(coef: Array) -> Array:
+    """Operator rows coef (rows, width, k) as dense (k, rows, rows + width - 1) matrices whose
+    column j is the first row's first frame + j."""
+    rows, width, k = coef.shape
+    out = np.zeros((k, rows, rows + width - 1))
     r = np.arange(rows)[:, None]
-    out[r, r + np.arange(width)[None, :]] = op.coef[lo:hi]
+    out[:, r, r + np.arange(width)[None, :]] = coef.transpose(2, 0, 1)
     return out
 
 
@@ -421,4 +434,4 @@ def _band_index(n: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]
     return dest[keep], src[keep]
 
 
-__all__ = ["Refined", "refine"]
+__all__ = ["REFINE_STAGES", "Refined", "Refinement", "refine"]

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.ik.spline_ops import BandOp, spline_ops
+from camtraj.ik.spline_ops import BandOps, spline_ops
 from camtraj.robot import PRISMATIC, REVOLUTE, Robot
 
 Array = NDArray[np.float64]
@@ -74,27 +74,26 @@ def margin_peak(e: Array) -> tuple[float, Array]:
 class TakeUse:
     """A path's use of the limits: the spline's velocity, acceleration and jerk usages
     (:mod:`camtraj.ik.spline_ops`) at every knot and piece middle over the limits per frame
-    interval, one (operator, (rows, 8)) pair per operator, and the ends' stopping needs
+    interval, ``z`` (rows, 8, k) read by the operators ``ops``, and the ends' stopping needs
     (:meth:`ShotCost.edge_needs`: need, d need / d z1, d need / d z2, and the operator rows
     (2 ends, velocity / acceleration, width) they are read with), None below 3 frames."""
 
-    usages: list[tuple[BandOp, Array]]
+    ops: BandOps
+    z: Array
     ends: tuple[Array, Array, Array, Array] | None
 
     def peak(self) -> float:
         """max(|v|, |a|^(1/2), |j|^(1/3), end needs): the take runs at most at 1/peak."""
-        out = max(float(np.abs(z).max()) ** (1.0 / op.order) for op, z in self.usages)
-        out = float(out)
+        top = np.abs(self.z).max(axis=(0, 1))
+        out = float((top ** (1.0 / np.asarray(self.ops.orders, dtype=float))).max())
         if self.ends is not None:
             out = max(out, float(self.ends[0].max()))
         return out
 
     def power_sum(self, power: float, scale: float) -> float:
         """sum (u / scale)^power over every use u (u = |v|, |a|^(1/2), |j|^(1/3), needs)."""
-        phi = 0.0
-        for op, z in self.usages:
-            k = op.order
-            phi += float(((np.abs(z) / scale ** k) ** (power / k)).sum())
+        k = np.asarray(self.ops.orders, dtype=float)
+        phi = float(((np.abs(self.z) / scale ** k) ** (power / k)).sum())
         if self.ends is not None:
             phi += float(((self.ends[0] / scale) ** power).sum())
         return phi
@@ -158,17 +157,16 @@ class ShotCost:
     def take_use(self, q: Array) -> TakeUse:
         """The take's use of the limits along a continuous path q (n, 8) (:class:`TakeUse`)."""
         n = q.shape[0]
-        lims = (self.vel, self.acc, self.jerk)
         if n < 3:
-            op = BandOp(1, np.array([[-1.0, 1.0]]), 0)
-            return TakeUse([(op, np.diff(q, axis=0) / self.vel)], None)
+            ops = BandOps((1,), (n - 1,), np.tile([[[-1.0], [1.0]]], (n - 1, 1, 1)), 0)
+            return TakeUse(ops, ops.apply(q / self.vel), None)
         ops = spline_ops(n)
-        zs = [(op, op.apply(q) / lims[op.order - 1]) for op in ops]
-        vel_z, acc_z = zs[0][1], zs[2][1]  # order 1 and 2 at the knots
-        need = self.edge_needs(vel_z[[0, -1]], acc_z[[0, -1]])
-        rows = np.stack([np.stack([ops[0].coef[0], ops[2].coef[0]]),
-                         np.stack([ops[0].coef[-1], ops[2].coef[-1]])])
-        return TakeUse(zs, (*need, rows))
+        lims = np.stack([(self.vel, self.acc, self.jerk)[k - 1] for k in ops.orders], axis=-1)
+        z = ops.apply(q) / lims
+        vel_z, acc_z = z[[0, -1], :, 0], z[[0, -1], :, 2]  # order 1 and 2 at the knots
+        need = self.edge_needs(vel_z, acc_z)
+        rows = np.stack([ops.coef[[0, 0], :, [0, 2]], ops.coef[[-1, -1], :, [0, 2]]])
+        return TakeUse(ops, z, (*need, rows))
 
     def edge_needs(self, z1: Array, z2: Array) -> tuple[Array, Array, Array]:
         """The slow-down each end's stop needs to stay under the velocity limit, as a usage.

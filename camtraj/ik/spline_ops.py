@@ -33,44 +33,41 @@ _END = 24  # rows at each end computed exactly (0.43^24 ~ 2e-9 of a frame's infl
 
 
 @dataclass(frozen=True)
-class BandOp:
-    """Rows ``r`` of ``value[r] = sum_o coef[r, o] * q[r + offset + o]`` (per knot interval^order).
+class BandOps:
+    """k banded operators read side by side (one pass over the path gives all of them):
+    ``value[r, :, i] = sum_o coef[r, o, i] * q[r + offset + o]`` (per knot interval^order).
 
     Attributes:
-        order: Derivative order 1..3.
-        coef: (rows, width) weights; columns that fall outside the path are zero.
+        orders: Derivative order of each operator (k,).
+        rows: Rows each operator has (k,); the rows past them have zero weights.
+        coef: (rows, width, k) weights; columns that fall outside the path are zero.
         offset: Column of ``coef[:, 0]`` relative to the row index.
-        inner: Rows [a, b) that all have the same weights (the shift-invariant kernel);
+        inner: Rows [a, b) that all have the same weights (the shift-invariant kernels);
             empty for a short path.
     """
 
-    order: int
+    orders: tuple[int, ...]
+    rows: tuple[int, ...]
     coef: Array
     offset: int
     inner: tuple[int, int] = (0, 0)
 
     def apply(self, q: Array) -> Array:
-        """Values (rows, m) for frame values q (n, m)."""
-        rows, width = self.coef.shape
+        """Values (rows, m, k) for frame values q (n, m)."""
+        rows, width, k = self.coef.shape
         win = np.lib.stride_tricks.sliding_window_view(self._padded(q), width, axis=0)[:rows]
         a, b = self.inner
         if b <= a:
-            return np.asarray(np.einsum("rw,rmw->rm", self.coef, win))
-        out = np.empty((rows, q.shape[1]))
+            return np.asarray(np.einsum("rwk,rmw->rmk", self.coef, win))
+        out = np.empty((rows, q.shape[1], k))
         out[a:b] = win[a:b] @ self.coef[a]  # the shift-invariant rows: one product
-        out[:a] = np.einsum("rw,rmw->rm", self.coef[:a], win[:a])
-        out[b:] = np.einsum("rw,rmw->rm", self.coef[b:], win[b:])
+        out[:a] = np.einsum("rwk,rmw->rmk", self.coef[:a], win[:a])
+        out[b:] = np.einsum("rwk,rmw->rmk", self.coef[b:], win[b:])
         return out
-
-    def rows_at(self, q: Array, rows: list[int]) -> Array:
-        """Values (len(rows), m) of the given rows only."""
-        pad = self._padded(q)
-        width = self.coef.shape[1]
-        return np.stack([self.coef[r] @ pad[r:r + width] for r in rows])
 
     def _padded(self, q: Array) -> Array:
         """q with zero frames before and after, so row r reads pad[r:r + width]."""
-        rows, width = self.coef.shape
+        rows, width, _ = self.coef.shape
         pad = np.zeros((rows + width, q.shape[1]))
         lo = -self.offset  # q[j] sits at padded index j + lo
         pad[lo:lo + q.shape[0]] = q[: rows + width - lo]
@@ -101,9 +98,10 @@ def _responses(n: int) -> dict[tuple[int, float], Array]:
 
 
 @lru_cache(maxsize=32)
-def spline_ops(n: int) -> tuple[BandOp, ...]:
-    """The six operators (orders 1-3 at knots and at piece middles) for a path of n >= 3
-    frames.
+def spline_ops(n: int) -> BandOps:
+    """The six operators (orders 1-3 at knots and at piece middles, in that order: velocity
+    at knots, at middles, acceleration at knots, ...) for a path of n >= 3 frames, side by
+    side (n rows; the middles' last row is empty).
 
     A derivative of order d of the spline is zero on polynomials below degree d (the natural
     quintic spline reproduces them), so it is a weighted sum of the path's d-th differences;
@@ -114,34 +112,37 @@ def spline_ops(n: int) -> tuple[BandOp, ...]:
     small = n <= 2 * _END + 4 * k
     m = n if small else 2 * _END + 4 * k
     dense = _responses(m)
-    ops = []
-    for (d, _tau), resp in dense.items():
+    width = 2 * k + 2
+    coef = np.zeros((n, width, len(dense)))
+    orders, counts = [], []
+    inner = (0, n)
+    for i, ((d, _tau), resp) in enumerate(dense.items()):
         weights = resp
         for _ in range(d):  # resp == weights @ (d-th difference matrix): undo one at a time
             weights = -np.cumsum(weights, axis=1)[:, :-1]
         rows_m = resp.shape[0]
-        wa, oa = 2 * k + 2 - d, -k
+        wa, oa = width - d, -k
         idx = np.arange(rows_m)[:, None] + oa + np.arange(wa)[None, :]
         inside = (idx >= 0) & (idx < m - d)
         band = np.where(inside, weights[np.arange(rows_m)[:, None], np.clip(idx, 0, m - d - 1)],
                         0.0)
         rows = rows_m + (n - m)
         a = np.zeros((rows, wa))
-        inner = (0, 0)
         if small:
             a[:] = band
+            inner = (0, 0)
         else:
             half = rows_m // 2
             a[:half] = band[:half]
             a[rows - (rows_m - half):] = band[half:]
             a[half:rows - (rows_m - half)] = band[half]  # the shift-invariant kernel
-            inner = (half, rows - (rows_m - half))
+            inner = (max(inner[0], half), min(inner[1], rows - (rows_m - half)))
         stencil = np.diff(np.eye(d + 1), d, axis=0)[0]  # d-th difference weights
-        coef = np.zeros((rows, wa + d))
         for j, c in enumerate(stencil):
-            coef[:, j:j + wa] += c * a
-        ops.append(BandOp(d, coef, oa, inner))
-    return tuple(ops)
+            coef[:rows, j:j + wa, i] += c * a
+        orders.append(d)
+        counts.append(rows)
+    return BandOps(tuple(orders), tuple(counts), coef, -k, inner)
 
 
-__all__ = ["HALF_WIDTH", "BandOp", "spline_ops"]
+__all__ = ["HALF_WIDTH", "BandOps", "spline_ops"]

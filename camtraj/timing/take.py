@@ -50,6 +50,7 @@ UNIFORM_RTOL = 1e-6
 #: ``"scale"`` slows a move by at most this factor; a move whose run-up or run-out still has
 #: no room then has an axis at its limit moving into it (only another IK answer helps).
 MAX_SCALE = 1000.0
+FACTOR_RTOL = 1e-6  # relative precision of the slow-down the run-up and run-out need
 
 
 @dataclass(frozen=True, eq=False)
@@ -355,19 +356,20 @@ class _RealTime:
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
-           edges: str, start: Array | None, frames: IntArray) -> _RealTime:
+           edges: str, start: Array | None, frames: IntArray,
+           precision: float = FACTOR_RTOL) -> _RealTime:
         path = FramePath.fit(q, dt, limits.lower, limits.upper, hold)
         ticks = max(1, round(rate * dt))
         x, stream, checked, checked_x = _grid_samples(path, ticks, 1.0 / dt)
         fit = _EdgeFit.of(path, stream, limits, edges, start, frames)
         # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
         shot_need = slowdown(checked, limits)
-        need = gentle_need = fit.factor(shot_need)
+        need = gentle_need = fit.factor(shot_need, precision)
         if edges == "gentle" and need > shot_need * (1.0 + LIMIT_RTOL):
             # Gentle ends are worth no slower take: where they would force one, the ends
             # use the full limits (the take a crew can shoot comes first).
             fast = _EdgeFit.of(path, stream, limits, "fast", start, frames)
-            fast_need = fast.factor(shot_need)
+            fast_need = fast.factor(shot_need, precision)
             if fast_need < need * (1.0 - LIMIT_RTOL):
                 fit, need, edges = fast, fast_need, "fast"
         max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
@@ -377,14 +379,18 @@ class _RealTime:
 
 def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
                    rate: float = 250.0, hold: ArrayLike | None = None,
-                   edges: str = "gentle") -> float:
+                   edges: str = "gentle", precision: float | None = None) -> float:
     """The maximum feasible speed :func:`time_shot` reports for a joint path (its
     ``TimingReport.max_speed``, the same computation), without timing a take: 0 where a
     position limit is crossed at the shot's own timing (no speed fixes that) or no slower
-    take fits the run-up and run-out; inf where nothing moves."""
+    take fits the run-up and run-out; inf where nothing moves.
+
+    ``precision``: relative precision of the slow-down the run-up and run-out need (default
+    :data:`FACTOR_RTOL`, what ``time_shot`` uses); a coarser one costs less and never reports
+    a faster speed than the exact one."""
     q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate, limits)
     rt = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
-                      frames)
+                      frames, FACTOR_RTOL if precision is None else precision)
     if any(v.quantity == "position" for v in
            violations(rt.checked, limits, FrameMap.of(rt.checked_x, frames), LIMIT_RTOL)):
         return 0.0
@@ -510,9 +516,10 @@ class _EdgeFit:
         lim = edge_limits(self.limits, self.peak_acc / s**2, self.peak_jerk / s**3, self.edges)
         return edge_problem(first, last, lim, self.frames, self.start)
 
-    def factor(self, low: float) -> float:
+    def factor(self, low: float, precision: float = FACTOR_RTOL) -> float:
         """The smallest slow-down >= ``low`` at which both edges fit (``low`` itself when
-        they do; inf when they do not even :data:`MAX_SCALE` times slower than real time).
+        they do; inf when they do not even :data:`MAX_SCALE` times slower than real time),
+        found to within ``precision`` (relative) above it.
 
         Bracketed by doubling, then bisected (the room an edge needs never grows as the
         move slows: its states and gentle limits scale together until the floor holds the
@@ -526,7 +533,7 @@ class _EdgeFit:
             if hi >= MAX_SCALE:
                 return math.inf
             lo, hi = hi, min(2.0 * hi, MAX_SCALE)
-        while hi / lo - 1.0 > 1e-6:
+        while hi / lo - 1.0 > precision:
             mid = math.sqrt(lo * hi)
             if self.problem(mid) is None:
                 hi = mid
