@@ -181,7 +181,9 @@ def main() -> None:
     camtraj convert shot.usd -o shot.mcap   the main job
     camtraj check shot.usd                  can the robot do it? (no output file)
     camtraj place shot.usd -o set.toml      where to lay the track for it
+    camtraj place a.usd b.usd -o set.toml   one track layout for a scene's shots
     camtraj info shot.mcap                  what a converted file holds
+    camtraj report shot.mcap -o shot.html   the HTML report of a converted take
     camtraj batch / farm                    many shots, locally or on a render farm
 
     Units: metres and degrees on the command line; metres and radians in files.

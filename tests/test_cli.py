@@ -456,3 +456,13 @@ def test_check_verdict_says_faster_or_slower_as_the_take_is(shot: Path, timing: 
     verdict = text.stdout.strip().splitlines()[-1]
     assert f"{timing} timing, {ratio:.3f}x {word} than the shot" in verdict, verdict
     assert ("slower" if word == "faster" else "faster") not in verdict, verdict
+
+
+def test_the_top_level_help_names_every_command() -> None:
+    # `report` and the scene form of `place` were missing from the summary
+    proc = run_cli("--help")
+    assert proc.returncode == 0, proc.stderr
+    summary = proc.stdout.split("Options:")[0]
+    for name in cli_main.commands:
+        assert re.search(rf"^\s+camtraj (\w+ / )*{name}\b", summary, re.MULTILINE), name
+    assert re.search(r"camtraj place \S+\.usd \S+\.usd", summary), summary
