@@ -181,7 +181,9 @@ def main() -> None:
     camtraj convert shot.usd -o shot.mcap   the main job
     camtraj check shot.usd                  can the robot do it? (no output file)
     camtraj place shot.usd -o set.toml      where to lay the track for it
+    camtraj place a.usd b.usd -o set.toml   one track layout for a scene's shots
     camtraj info shot.mcap                  what a converted file holds
+    camtraj report shot.mcap -o shot.html   the HTML report of a converted take
     camtraj batch / farm                    many shots, locally or on a render farm
 
     Units: metres and degrees on the command line; metres and radians in files.
@@ -455,9 +457,10 @@ def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float)
 
 def _verdict(r: dict[str, Any]) -> str:
     """A feasible check's last line: 'SHOT: FEASIBLE at shot timing, 206% of real time ...'."""
-    timing = r["timing"]
-    how = (f"{timing} timing" if r["speed_factor"] == 1.0
-           else f"{timing} timing, {r['speed_factor']:.3f}x slower than the shot")
+    timing, factor = r["timing"], r["speed_factor"]
+    how = (f"{timing} timing" if factor == 1.0
+           else f"{timing} timing, {factor:.3f}x slower than the shot" if factor > 1.0
+           else f"{timing} timing, {1.0 / factor:.3f}x faster than the shot")
     return (f"{r['shot']}: FEASIBLE at {how}; maximum feasible speed "
             f"{_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}")
 

@@ -65,6 +65,7 @@ from camtraj.batch import output_names
 from camtraj.errors import CamtrajError, InputError
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
+    EDGE_MODES,
     FOCAL_LENGTH_UNITS,
     OBJECTIVES,
     TIMING_MODES,
@@ -130,10 +131,12 @@ _OPENJD_PARAMS = {
     "--objective": ("Objective", "IK objective."),
     "--focal-length-unit": ("FocalLengthUnit", "How the shot's focalLength is read."),
     "--clearance": ("Clearance", "Distance [m] kept from the set file's obstacles."),
+    "--edges": ("Edges", "Run-up and run-out: gentle or fast."),
+    "--lens": ("Lens", "Lens file: zoom, focus and iris motors."),
 }
 """Job parameter name and description of each optional convert flag."""
 
-_PATH_FLAGS = ("--robot", "--set-file")
+_PATH_FLAGS = ("--robot", "--set-file", "--lens")
 
 _BRACE_PARAMS = {"{": "CamtrajLeftBrace", "}": "CamtrajRightBrace"}
 """Job parameters whose values are a literal ``{`` and ``}`` (see :func:`_openjd_literal`)."""
@@ -330,6 +333,8 @@ def openjd_template(
             definition["allowedValues"] = list(OBJECTIVES)
         if flag == "--focal-length-unit":
             definition["allowedValues"] = list(FOCAL_LENGTH_UNITS)
+        if flag == "--edges":
+            definition["allowedValues"] = list(EDGE_MODES)
         definition["default"] = value
         is_path = flag in _PATH_FLAGS
         definition["description"] = description + (

@@ -424,6 +424,9 @@ def lens_from_table(data: dict[str, Any], *, where: str, source: str, prefix: st
     ang = math.pi / 180.0 if unit == "deg" else 1.0
     axes = tuple(_axis(r, r.table(data, axis), axis, ang) for axis in LENS_AXES
                  if axis in data)
+    if not axes:
+        raise r.fail("zoom", "is missing, and so are [focus] and [iris]: a lens file "
+                     "describes the motors that drive the lens; give at least one")
     focal: float | None = None
     if "focal_length" in data:
         if any(a.name == "zoom" for a in axes):
@@ -521,6 +524,9 @@ def _with_controller(r: _Reader, controllers: dict[str, Any], axis: LensAxis) ->
     ct = r.table(controllers, axis.name)
     r.no_unknown(ct, {"scale", "offset", "sign"}, key)
     scale = r.number(r.required(ct, "scale", key), f"{key}.scale")
+    if not scale > 0.0:
+        raise r.fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per radian; "
+                     "sign gives the direction)")
     sign = ct.get("sign", 1)
     if sign not in (1, -1) or isinstance(sign, bool):
         raise r.fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")

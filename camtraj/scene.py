@@ -217,6 +217,7 @@ def place_scene(
                               clearance=clearance, timing=s.timing) for s in shots]
     for s, opt in zip(shots, options, strict=True):
         require_regular_files(s.path, opt)
+    _no_repeats(shots)
     rob = Robot.default() if robot is None else Robot.from_toml(robot)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
     problems: list[Problem] = []
@@ -268,6 +269,26 @@ def place_scene(
     return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,
                        runner.count, screened, time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
+
+
+def _no_repeats(shots: Sequence[SceneShot]) -> None:
+    """A shot listed twice (the same file, under any name, with the same camera and frames)
+    is a mistake in the list, not a second shot.
+
+    Raises:
+        InputError: Naming both places in the list.
+    """
+    seen: dict[tuple[int, int, str | None, tuple[int, int] | None], int] = {}
+    for k, s in enumerate(shots):
+        st = os.stat(s.path)
+        key = (st.st_dev, st.st_ino, s.camera, s.frames)
+        if key in seen:
+            first = seen[key]
+            msg = (f"shot {k + 1} ({s.name}) repeats shot {first + 1} "
+                   f"({shots[first].name}): the same file, camera and frames; list each "
+                   "shot once")
+            raise InputError(msg)
+        seen[key] = k
 
 
 def _best_ok(group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]],

@@ -438,3 +438,31 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(cli: CliRuns, key: s
         assert leftovers(folder) == []
     if key == "output_under_a_file":
         assert folder.read_text() == "not a folder\n"
+
+
+@pytest.mark.parametrize(("shot", "timing", "word"), [
+    (SHOTS / "blender_crane_up.usda", "optimal", "faster"),  # optimal shortens it
+    (WHIP, "scale", "slower"),  # too fast as shot: scale slows it down
+])
+def test_check_verdict_says_faster_or_slower_as_the_take_is(shot: Path, timing: str,
+                                                            word: str) -> None:
+    # the verdict said "0.276x slower than the shot" for a take shot 3.6x faster
+    text = run_cli("check", shot, "--timing", timing, "-q")
+    js = run_cli("check", shot, "--timing", timing, "--json")
+    assert text.returncode == js.returncode == 0, text.stderr + js.stderr
+    factor = json.loads(js.stdout)["speed_factor"]  # shot's duration in the take / its own
+    assert (factor < 1.0) == (word == "faster"), factor
+    ratio = 1.0 / factor if factor < 1.0 else factor
+    verdict = text.stdout.strip().splitlines()[-1]
+    assert f"{timing} timing, {ratio:.3f}x {word} than the shot" in verdict, verdict
+    assert ("slower" if word == "faster" else "faster") not in verdict, verdict
+
+
+def test_the_top_level_help_names_every_command() -> None:
+    # `report` and the scene form of `place` were missing from the summary
+    proc = run_cli("--help")
+    assert proc.returncode == 0, proc.stderr
+    summary = proc.stdout.split("Options:")[0]
+    for name in cli_main.commands:
+        assert re.search(rf"^\s+camtraj (\w+ / )*{name}\b", summary, re.MULTILINE), name
+    assert re.search(r"camtraj place \S+\.usd \S+\.usd", summary), summary

@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
@@ -218,10 +219,18 @@ def test_duplicate_stems_are_refused(tmp_path: Path) -> None:
 def test_every_convert_option_reaches_the_openjd_task(tmp_path: Path) -> None:
     robot = tmp_path / "robot.toml"
     shutil.copy2(ROOT / "camtraj" / "data" / "robot.toml", robot)
+    lens = tmp_path / "lens.toml"
+    shutil.copy2(ROOT / "camtraj" / "data" / "lenses" / "cine_zoom_24-290.toml", lens)
     options = _options(
         camera="/World/cam", robot=str(robot), placement="1,-2,0,90", frames="1:5",
         timing="scale", start_from="0,0,0,0,-90,0,0,0", objective="paper",
+        focal_length_unit="mm", edges="fast", lens=str(lens),
     )  # fmt: skip
+    options = replace(options, clearance=0.1)
+    # every field away from its default: every flag convert has (--edges and --lens were a
+    # KeyError traceback in farm export --format openjd)
+    assert all(getattr(options, f.name) != f.default for f in fields(ConvertOptions)
+               if f.name not in ("rate", "set_file")), options
     job = tmp_path / "jobs" / "j.yaml"
     farm.export_openjd([str(SAMPLES / "orbit_animated_parent.usda")], job, options=options,
                        relative=True)  # fmt: skip
@@ -234,8 +243,12 @@ def test_every_convert_option_reaches_the_openjd_task(tmp_path: Path) -> None:
     assert defaults["Timing"] == "scale"
     assert defaults["StartFrom"] == "0.0,0.0,0.0,0.0,-90.0,0.0,0.0,0.0"
     assert defaults["Objective"] == "paper"
+    assert defaults["FocalLengthUnit"] == "mm" and defaults["Clearance"] == "0.1"
+    assert defaults["Edges"] == "fast" and defaults["Lens"] == "../lens.toml"
     args = template["steps"][0]["script"]["actions"]["onRun"]["args"]
     assert args[args.index("--robot") + 1] == "{{Param.JobDir}}/{{Param.Robot}}"
+    assert args[args.index("--lens") + 1] == "{{Param.JobDir}}/{{Param.Lens}}"
+    assert args[args.index("--edges") + 1] == "{{Param.Edges}}"
     assert _openjd("check", str(job)).returncode == 0
 
 

@@ -125,6 +125,8 @@ def _bad(tmp_path: Path, text: str) -> str:
         ("max_jerk = 2400.0", "max_jerk = 2400.0\nspeed = 3", ["unknown key", "speed", "[zoom]"]),
         ('name = "Cine', 'focal_length = 35.0\nname = "Cine', ["[focal_length]", "zoom"]),
         ("sign = 1\n", "sign = 2\n", ["[controller.zoom.sign]", "1 or -1"]),
+        ("scale = 10430.378", "scale = 0.0", ["[controller.zoom.scale]", "positive"]),
+        ("scale = 10430.378", "scale = -10430.378", ["[controller.zoom.scale]", "positive"]),
         ("[controller.zoom]", "[controller.tilt]", ["unknown key", "tilt", "[controller]"]),
         ("calibration = [\n    [24.0", "calibration = 3\nx = [\n    [24.0", ["unknown key"]),
     ],
@@ -140,6 +142,19 @@ def test_bad_lens_files_are_one_line(tmp_path: Path, old: str, new: str,
 def test_a_prime_needs_its_focal_length(tmp_path: Path) -> None:
     text = PRIME.read_text(encoding="utf-8").replace("focal_length = 50.0\n", "")
     assert "[focal_length] is missing" in _bad(tmp_path, text)
+
+
+def test_a_lens_file_drives_at_least_one_motor(tmp_path: Path) -> None:
+    # a prime with its focal length but no [focus] or [iris] table was a traceback (exit 1)
+    text = 'name = "bare prime"\nangle_unit = "deg"\nfocal_length = 50.0\n'
+    message = _bad(tmp_path, text)
+    assert "[zoom] is missing" in message and "[focus]" in message and "[iris]" in message
+    path = tmp_path / "lens.toml"
+    out = tmp_path / "out.mcap"
+    proc = run_cli("convert", SHOTS / "maya_dolly_push_in.usda", "-o", out, "--lens", path)
+    assert proc.returncode == 2, proc.stderr
+    assert "[zoom] is missing" in error_line(proc)
+    assert not out.exists()
 
 
 def test_not_toml_and_not_a_file(tmp_path: Path) -> None:

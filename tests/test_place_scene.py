@@ -247,3 +247,35 @@ def test_the_layout_name_round_trips_through_the_set_file() -> None:
     for bad in ('""', "3", '"a\\nb"'):
         with pytest.raises(InputError, match=r"\[placement\] layout"):
             SetFile.parse(f"[placement]\nlayout = {bad}\n")
+
+
+def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
+    """The same file (under another name, or a hard link) with the same camera and frames is
+    a slip in the list: exit 2 before any search, not a table with the shot twice."""
+    import os
+    import shutil
+
+    from camtraj.errors import InputError
+    from camtraj.scene import SceneShot, _no_repeats
+
+    shot = tmp_path / "a.usda"
+    samples = Path(__file__).resolve().parents[1] / "samples" / "shots"
+    shutil.copyfile(samples / "blender_crane_up.usda", shot)
+    os.link(shot, tmp_path / "b.usda")
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[[shot]]\npath = "a.usda"\nframes = [1, 20]\n'
+                     '[[shot]]\npath = "./a.usda"\nframes = [1, 20]\ntiming = "scale"\n')
+    placed = tmp_path / "placed.toml"
+    for args, words in ((["--scene", scene], "shot 2 ("),
+                        ([shot, tmp_path / "b.usda"], "b.usda) repeats shot 1")):
+        proc = run("place", *args, "-o", placed, "-j", "1")
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.startswith("ERROR: ") and proc.stderr.count("\n") == 1
+        assert words in proc.stderr and "repeats shot 1" in proc.stderr, proc.stderr
+        assert not placed.exists()
+    # another frame range or camera of the same file is another shot
+    _no_repeats([SceneShot(str(shot), None, (1, 20)), SceneShot(str(shot), None, (21, 40)),
+                 SceneShot(str(shot), "/cam", (1, 20))])
+    with pytest.raises(InputError, match=r"shot 3 .* repeats shot 1"):
+        _no_repeats([SceneShot(str(shot)), SceneShot(str(shot), "/cam"),
+                     SceneShot(str(tmp_path / "b.usda"))])
