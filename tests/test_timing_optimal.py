@@ -132,6 +132,19 @@ def test_never_slower_than_scale(takes: dict[str, tuple[Array, Take, Take]], nam
                                               * scale.speed_factor, rel=1e-9)
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_never_slower_than_the_shot_at_its_maximum_feasible_speed(
+        takes: dict[str, tuple[Array, Take, Take]], name: str) -> None:
+    """A shot with no hold played uniformly at its maximum feasible speed is a take whose
+    run-up and run-out fit: the time-optimal one is never longer (a shot that can run 3x
+    faster than real time gets a take at least 3x shorter)."""
+    q, take, scale = takes[name]
+    if not np.all(np.any(np.diff(q, axis=0) != 0.0, axis=1)):
+        pytest.skip("the shot holds still somewhere: optimal keeps holds, a uniform law not")
+    uniform = 1.0 / scale.report.max_speed
+    assert take.speed_factor <= uniform * (1 + 1e-6), (take.speed_factor, uniform)
+
+
 def test_faster_than_scale_where_limits_leave_room(
     takes: dict[str, tuple[Array, Take, Take]],
 ) -> None:

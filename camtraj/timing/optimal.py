@@ -29,15 +29,16 @@ more than :data:`REPAIR_ABOVE`, those places become points of the programs and t
 solved again; the small excess left is removed by playing the whole time law uniformly slower
 by just enough (velocity scales with the slow-down, jerk with its cube). The servo samples
 are checked once more, by their analytic values and by divided differences of the sampled
-positions. If the answer is not shorter than the ``"scale"`` take, :func:`optimal` returns
-None and the caller keeps the scale take.
+positions. If the answer is not shorter than the uniform take it must beat (the
+``"scale"`` take, or the whole shot at its maximum feasible speed), :func:`optimal` returns
+None and the caller keeps that one.
 
 Stretches where no axis moves are kept as holds of their original duration. The path is
 still at the two ends of a hold (every axis is clamped to the hold's line with zero
 acceleration there), so the speed along the path may change at the hold without any axis
-noticing. A stretch that starts or ends the shot does so in the state of ``"scale"`` mode
-played no faster (``u`` at most that of scale, ``u' = u'' = 0``), so the run-up and run-out
-are those of a scale take. Units: SI (m, rad, s); x in frames.
+noticing. A stretch that starts or ends the shot does so no faster than the uniform take
+whose run-up and run-out fit (``u`` at most its, ``u' = u'' = 0``), so the run-up and
+run-out have room. Units: SI (m, rad, s); x in frames.
 """
 
 from __future__ import annotations
@@ -180,7 +181,8 @@ def _basis(x: Array, a: int, b: int) -> tuple[IntArray, Array]:
 
 
 def optimal(
-    path: FramePath, limits: Limits, rate: float, scale_factor: float
+    path: FramePath, limits: Limits, rate: float, scale_factor: float,
+    ends: float | None = None,
 ) -> tuple[Array, Array, Samples, IntArray] | None:
     """Fastest traversal of the path under velocity, acceleration and jerk limits.
 
@@ -189,8 +191,9 @@ def optimal(
         limits: The robot's limits.
         rate: Requested servo rate [Hz]: every frame interval is cut into the fewest equal
             steps no longer than ``1 / rate``, so every frame is a sample.
-        scale_factor: The slow-down of the ``"scale"`` take (>= 1): the shot starts and ends
-            no faster than it, and the answer must beat it.
+        scale_factor: The slow-down of the uniform take the answer must beat.
+        ends: The slow-down of a uniform take whose run-up and run-out fit (default
+            ``scale_factor``): the shot starts and ends no faster than it.
 
     Returns:
         Sample times of the shot part from the first frame [s], the frame coordinate of each
@@ -199,7 +202,7 @@ def optimal(
     """
     n = path.n
     dt = path.dt
-    u_scale = 0.5 / (scale_factor * dt) ** 2
+    u_scale = 0.5 / ((scale_factor if ends is None else ends) * dt) ** 2
     still_all = np.all(path.still, axis=1)
     laws = []
     for a, b in runs(~still_all):

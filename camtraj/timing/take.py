@@ -230,8 +230,8 @@ def time_shot(
     if position_bad:
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
 
-    def scaled() -> tuple[float, int, Samples, Array, Edge, Edge]:
-        return _scale(path, dt, rate, limits, need, fit, start_q)
+    def scaled(floor: float = 1.0) -> tuple[float, int, Samples, Array, Edge, Edge]:
+        return _scale(path, dt, rate, limits, need, fit, start_q, floor)
 
     warnings: list[str] = list(edge_note)
     if mode == "shot":
@@ -252,13 +252,19 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
     else:
-        # The scale take, unless the jerk-limited time-optimal retime is shorter; its ends
-        # are no faster than the scale take's, so its run-up and run-out have room too.
+        # The scale take, or the whole shot played at its maximum feasible speed where that
+        # is faster and the shot has no hold to keep (a uniform law shortens holds too),
+        # unless the jerk-limited time-optimal retime is shorter still. Its ends are no faster
+        # than the uniform take at the maximum feasible speed, so its run-up and run-out
+        # have room too.
         speed_factor, ticks, shot, shot_x, up, out = scaled()
+        fastest = scaled(floor=1.0 / MAX_SCALE)
+        if fastest[0] < speed_factor and not path.still.all(axis=1).any():
+            speed_factor, ticks, shot, shot_x, up, out = fastest
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
-        retimed = optimal(path, limits, rate, speed_factor)
+        retimed = optimal(path, limits, rate, speed_factor, ends=fastest[0])
         if retimed is not None:
             shot_t, shot_x, shot, frame_idx = retimed
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
@@ -620,10 +626,11 @@ def _shot_mode_error(
 
 def _scale(
     path: FramePath, dt: float, rate: float, limits: Limits, factor: float, fit: _EdgeFit,
-    start: Array | None,
+    start: Array | None, floor: float = 1.0,
 ) -> tuple[float, int, Samples, Array, Edge, Edge]:
-    """Slow the move uniformly by the smallest factor >= 1 at which the shot and its run-up
-    and run-out fit; resampled, and the edges built and checked at that factor.
+    """Slow the move uniformly by the smallest factor >= ``floor`` (1: never faster than
+    the shot) at which the shot and its run-up and run-out fit; resampled, and the edges
+    built and checked at that factor.
 
     ``factor`` is where the real-time check and the edge planning say everything fits. The
     take's grid has other sample points (ticks per frame change with the factor), so the
@@ -633,7 +640,7 @@ def _scale(
     if not math.isfinite(factor):
         msg = fit.no_room()
         raise TimingLimitError(msg, max_speed=0.0, feasible_fps=0.0, scale_factor=math.inf)
-    s = max(1.0, factor)
+    s = max(floor, factor)
     frames = np.array(fit.frames, dtype=np.int64)
     for _ in range(40):
         ticks = max(1, round(rate * s * dt))
