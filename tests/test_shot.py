@@ -107,6 +107,24 @@ def test_reported_margins_match_the_link_geometry(
             float(np.abs(np.abs(q[:, 6]) - math.pi / 2).min()), abs=1e-9)
 
 
+def test_the_programme_is_the_same_whatever_its_blocks(robot: Robot) -> None:
+    """The step costs are made a block of frames at a time (bounded memory): blocks of 1, 7
+    and all frames give the same tables and the same answer, bit for bit."""
+    import dataclasses
+
+    targets = camera_path(robot, 60)
+    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
+    cand = candidates(robot, targets, n_track=2, n_extend=2)
+    for merged in (False, True):
+        unary, steps = chain_costs(cost, cand, merged)
+        whole = steps.block(0, 59)
+        parts = np.concatenate([steps.block(a, min(a + 7, 59)) for a in range(0, 59, 7)])
+        assert np.array_equal(whole, parts)
+        answers = [viterbi(unary, dataclasses.replace(steps, per=per)) for per in (1, 7, 100)]
+        for best, path in answers[1:]:
+            assert np.array_equal(best, answers[0][0]) and np.array_equal(path, answers[0][1])
+
+
 def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
     """Every sequence of a coarse candidate set on a short shot, against the Viterbi pass.
 
@@ -118,9 +136,9 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
     cost = ShotCost.for_robot(robot, 1.0 / 24.0)
     cand = candidates(robot, targets, n_track=1, n_extend=2)
     for merged, frames in ((False, 8), (True, 4)):
-        unary, pair = chain_costs(cost, cand, merged)
-        u, p = unary[:frames], pair[:frames - 1]
-        best, _ = viterbi(u, p)
+        unary, steps = chain_costs(cost, cand, merged)
+        u, p = unary[:frames], steps.block(0, frames - 1)
+        best, _ = viterbi(u, steps)
         chains, states = u.shape[1:]
         seqs = np.array(np.unravel_index(np.arange(states ** frames), (states,) * frames)).T
         for c in range(chains):

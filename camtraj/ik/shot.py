@@ -22,7 +22,9 @@ closed-form branch are chosen for the whole shot, not frame by frame:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +49,8 @@ from camtraj.robot import REVOLUTE, Robot
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-_CHUNK = 2_000_000  # pair-cost elements per vectorised block (memory bound, ~16 MB each)
+_CHUNK = 262_144  # pair-cost elements per vectorised block (2 MB each, a few temporaries)
+_POINTS = 4_096  # candidate points solved per vectorised block (the closed form's temporaries)
 
 
 @dataclass(frozen=True)
@@ -109,10 +112,16 @@ def candidates(robot: Robot, targets: Array, n_track: int = 2, n_extend: int = 2
     r4g = r4.reshape(shape)
     interval = np.broadcast_to(iv[..., None], r4.shape).reshape(shape)
     valid_g = np.broadcast_to(valid[..., None], r4.shape).reshape(shape)
-    y, ok = measures(robot, np.repeat(targets, shape[1], axis=0), r1g.ravel(), r4g.ravel(),
-                     robot.home)
-    y = y.reshape(*shape, N_BRANCHES, N_MEASURES)
-    ok = ok.reshape(*shape, N_BRANCHES) & valid_g[..., None]
+    y = np.empty((*shape, N_BRANCHES, N_MEASURES))
+    ok = np.empty((*shape, N_BRANCHES), dtype=bool)
+    per = max(1, _POINTS // shape[1])  # frames per block: the closed form's temporaries
+    for a in range(0, n, per):
+        e = min(a + per, n)
+        yb, okb = measures(robot, np.repeat(targets[a:e], shape[1], axis=0),
+                           r1g[a:e].ravel(), r4g[a:e].ravel(), robot.home)
+        y[a:e] = yb.reshape(e - a, shape[1], N_BRANCHES, N_MEASURES)
+        ok[a:e] = okb.reshape(e - a, shape[1], N_BRANCHES)
+    ok &= valid_g[..., None]
     return Candidates(np.ascontiguousarray(r1g), r4g, np.ascontiguousarray(interval), y, ok,
                       lo1, hi1)
 
@@ -149,8 +158,50 @@ def branch_measures(robot: Robot, targets: Array, r1: Array, r4: Array, previous
     return y, ok
 
 
+@dataclass(frozen=True)
+class StepCosts:
+    """The dynamic programme's step costs (n - 1, C, S, S), computed a block of frames at a
+    time from the candidates: the whole table would hold (n - 1) C S^2 numbers (128 KiB a
+    frame merged).
+
+    ``states`` turns candidate values (frames, G, 8, ...) into the programme's states
+    (frames, C, S, ...); ``chains``: (C, S); ``shared``: track and extend are the same in
+    every chain; ``per``: frames per block.
+    """
+
+    cost: ShotCost
+    cand: Candidates
+    states: Callable[[NDArray[Any]], NDArray[Any]]
+    chains: tuple[int, int]
+    shared: bool
+    wrap: bool
+    per: int
+
+    def block(self, a: int, e: int) -> Array:
+        """Step costs from frames a..e-1 to the next (e - a, C, S, S); infeasible states
+        are left to their unary costs."""
+        y, n = self.cand.y, self.cand.y.shape[0]
+        c, s = self.chains
+        pair = np.zeros((e - a, c, s, s))
+        for i in range(8):
+            # track and extend do not depend on the branch: one chain's values serve all
+            qi = self.states(y[a:e + 1, :, :, i])
+            if self.shared and not REVOLUTE[i]:
+                qi = qi[:, :1]
+            d = qi[1:, :, None, :] - qi[:-1, :, :, None]
+            pair += self.cost.axis_step_cost(i, d, self.wrap)
+        # run-up and run-out room at the shot's ends
+        if a == 0:
+            qs = self.states(y[:2, :, :, :8])  # (2, C, S, 8)
+            pair[0] += self.cost.edge_cost(qs[0, :, :, None, :], qs[1, :, None, :, :])
+        if e == n - 1:
+            qs = self.states(y[-2:, :, :, :8])
+            pair[-1] += self.cost.edge_cost(qs[-1, :, None, :, :], qs[-2, :, :, None, :])
+        return pair
+
+
 def chain_costs(cost: ShotCost, cand: Candidates, merged: bool,
-                wrap: bool = True) -> tuple[Array, Array]:
+                wrap: bool = True) -> tuple[Array, StepCosts]:
     """The dynamic programme's tables.
 
     With ``wrap`` a revolute step is the shorter way round (the joint values of a state are
@@ -158,45 +209,37 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool,
     as they stand (the values are the path: :func:`lanes`).
 
     Returns:
-        ``unary`` (n, C, S) and ``pair`` (n - 1, C, S, S): the margin cost of each state and
-        the first-order cost of each step, inf where infeasible. Chains C are the branch labels
+        ``unary`` (n, C, S), the margin cost of each state (inf where infeasible), and the
+        first-order cost of each step (:class:`StepCosts`). Chains C are the branch labels
         that have a feasible state on every frame, with S = G candidate points each, or
         (``merged``) one chain of S = 8 G states.
     """
-    y = cand.y.transpose(0, 2, 1, 3)  # (n, 8, G, 10)
-    ok = cand.ok.transpose(0, 2, 1)
-    n, b, g = ok.shape
+    n, g, b = cand.ok.shape
     shared = not merged  # every chain has the same candidate points (track, extend)
-    if merged:
-        y, ok = y.reshape(n, 1, b * g, N_MEASURES), ok.reshape(n, 1, b * g)
-    else:
-        alive = ok.any(axis=2).all(axis=0)
-        y, ok = y[:, alive], ok[:, alive]
-    unary = np.where(ok, cost.unary(y), np.inf)
+    alive = cand.ok.any(axis=1).all(axis=0)  # branch labels feasible on every frame
+
+    def states(y: NDArray[Any]) -> NDArray[Any]:  # (frames, G, 8, ...) -> (frames, C, S, ...)
+        y = y.swapaxes(1, 2)
+        return y.reshape(y.shape[0], 1, b * g, *y.shape[3:]) if merged else y[:, alive]
+
+    ok = states(cand.ok)
     c, s = ok.shape[1:]
-    q = np.moveaxis(y[..., :8], -1, 0)  # (8, n, C, S): one contiguous block per axis
-    pair = np.zeros((max(n - 1, 0), c, s, s))
-    per = max(1, _CHUNK // max(c * s * s, 1))
-    for a in range(0, n - 1, per):
-        e = min(a + per, n - 1)
-        for i in range(8):
-            # track and extend do not depend on the branch: one chain's values serve all
-            qi = q[i, :, :1] if shared and not REVOLUTE[i] else q[i]
-            d = qi[a + 1:e + 1, :, None, :] - qi[a:e, :, :, None]
-            pair[a:e] += cost.axis_step_cost(i, d, wrap)
-    if n > 1:  # run-up and run-out room at the shot's ends
-        qs = np.moveaxis(q, 0, -1)  # (n, C, S, 8)
-        pair[0] += cost.edge_cost(qs[0, :, :, None, :], qs[1, :, None, :, :])
-        pair[-1] += cost.edge_cost(qs[-1, :, None, :, :], qs[-2, :, :, None, :])
-    return unary, pair
+    unary = np.empty((n, c, s))  # block by block: the margin cost's temporaries
+    per = max(1, _POINTS // max(c * s, 1))
+    for a in range(0, n, per):
+        unary[a:a + per] = np.where(ok[a:a + per], cost.unary(states(cand.y[a:a + per])),
+                                    np.inf)
+    return unary, StepCosts(cost, cand, states, (c, s), shared, wrap,
+                            max(1, _CHUNK // max(c * s * s, 1)))
 
 
-def viterbi(unary: Array, pair: Array) -> tuple[Array, IntArray]:
+def viterbi(unary: Array, steps: StepCosts) -> tuple[Array, IntArray]:
     """Shortest path over frames, one per chain.
 
     Args:
         unary: (n, C, S) state costs (inf: infeasible).
-        pair: (n - 1, C, S, S) step costs from state s at frame k to s' at frame k + 1.
+        steps: Step costs from state s at frame k to s' at frame k + 1 (the first n - 1
+            frames' are used), a block at a time.
 
     Returns:
         The best total cost per chain (C,) and its states (C, n).
@@ -206,11 +249,14 @@ def viterbi(unary: Array, pair: Array) -> tuple[Array, IntArray]:
     back = np.empty((max(n - 1, 0), c, s), dtype=np.intp)
     rows = np.arange(c)[:, None]
     cols = np.arange(s)[None, :]
-    for k in range(n - 1):
-        tot = acc[:, :, None] + pair[k]
-        arg = np.argmin(tot, axis=1)
-        back[k] = arg
-        acc = tot[rows, arg, cols] + unary[k + 1]
+    for a in range(0, n - 1, steps.per):
+        e = min(a + steps.per, n - 1)
+        pair = steps.block(a, e)
+        for k in range(a, e):
+            tot = acc[:, :, None] + pair[k - a]
+            arg = np.argmin(tot, axis=1)
+            back[k] = arg
+            acc = tot[rows, arg, cols] + unary[k + 1]
     path = np.empty((c, n), dtype=np.intp)
     path[:, -1] = np.argmin(acc, axis=1)
     best = acc[np.arange(c), path[:, -1]]
@@ -262,8 +308,8 @@ def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
 def _choose(cost: ShotCost, cand: Candidates, wrap: bool) -> DPChoice | None:
     n, g = cand.r1.shape
     for merged in (False, True):
-        unary, pair = chain_costs(cost, cand, merged, wrap)
-        best, path = viterbi(unary, pair)
+        unary, steps = chain_costs(cost, cand, merged, wrap)
+        best, path = viterbi(unary, steps)
         if best.size == 0:
             continue
         c = int(np.argmin(best))
