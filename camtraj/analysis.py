@@ -78,17 +78,28 @@ def axis_value(name: str, value: float) -> float:
     return math.degrees(value) if revolute else value
 
 
-def margins_summary(path: PathSolution, frames: NDArray[Any]) -> dict[str, Any]:
-    """Smallest distances to the position limits (per axis), the wrist singularity and full
-    stretch over the shot, with the film frame where each occurs (degrees / metres)."""
+def margins_summary(analysis: Analysis) -> dict[str, Any]:
+    """Smallest distances to the position limits (per axis, the lens motors after the
+    joints), the wrist singularity and full stretch over the shot, with the film frame where
+    each occurs (degrees / metres). Needs ``analysis.path``."""
     from camtraj.robot import JOINT_NAMES
 
-    m = path.margins
+    assert analysis.path is not None
+    m, frames = analysis.path.margins, analysis.shot.frames
+    to_limits = {k: axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.to_limits,
+                                                            strict=True)}
+    at = {k: int(frames[i]) for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)}
+    lens = analysis.robot.lens
+    if lens is not None and analysis.lens_q is not None:
+        lim = lens.limits()
+        room = np.minimum(analysis.lens_q - lim.lower, lim.upper - analysis.lens_q)
+        for j, name in enumerate(lens.names):
+            k = int(np.argmin(room[:, j]))
+            to_limits[name] = axis_value(name, float(room[k, j]))
+            at[name] = int(frames[k])
     return {
-        "to_limits": {k: axis_value(k, float(v))
-                      for k, v in zip(JOINT_NAMES, m.to_limits, strict=True)},
-        "to_limits_frame": {k: int(frames[i])
-                            for k, i in zip(JOINT_NAMES, m.to_limits_frame, strict=True)},
+        "to_limits": to_limits,
+        "to_limits_frame": at,
         "wrist_singularity_deg": math.degrees(m.wrist),
         "wrist_singularity_frame": int(frames[m.wrist_frame]),
         "full_stretch_deg": math.degrees(m.stretch),

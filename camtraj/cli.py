@@ -516,14 +516,15 @@ def _report(r: dict[str, Any]) -> str:
         unit = "deg" if revolute else "m"
         up = r["runup"]["extent"].get(name, 0.0)
         out = r["runout"]["extent"].get(name, 0.0)
-        joint = name in margins["to_limits"]  # the lens motors have no IK margins
+        margin = margins["to_limits"].get(name)
+        travel = start["extent"].get(name)  # the lens motors start where the shot does
         lines.append(
             f"  {name:<8} {_pct(use.get('position', math.nan))}    "
             f"{_pct(use.get('velocity', math.nan))}   {_pct(use.get('acceleration', math.nan))}"
             f"  {_pct(use.get('jerk', math.nan))}        {_pct(ends[name]['acceleration'])}"
             f" {_pct(ends[name]['jerk'])}  {up:7.3f}  {out:7.3f} {unit:<3}"
-            + (f" {margins['to_limits'][name]:8.3f} {start['extent'][name]:8.3f}" if joint
-               else "        -        -")
+            + (f" {margin:8.3f}" if margin is not None else "        -")
+            + (f" {travel:8.3f}" if travel is not None else "        -")
         )
     lines.append(f"  margin: wrist singularity {margins['wrist_singularity_deg']:.1f} deg (frame "
                  f"{margins['wrist_singularity_frame']}), full stretch "

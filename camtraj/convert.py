@@ -339,7 +339,7 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "peak_use": json.dumps(take.report.peak_use, sort_keys=True),
         "position_range": json.dumps(take.report.position_range, sort_keys=True),
         # The margins the terminal prints, for the report of the file.
-        "margins": json.dumps(margins_summary(analysis.path, shot.frames), sort_keys=True),
+        "margins": json.dumps(margins_summary(analysis), sort_keys=True),
         # The run-up's and run-out's own peak use, for the report's "ends" columns.
         "edge_peak_use": json.dumps({"runup": take.report.runup.get("peak_use", {}),
                                      "runout": take.report.runout.get("peak_use", {})},
@@ -433,7 +433,7 @@ def summary(
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup),
         "move_to_start": _move_to_start(path),
-        "margins": margins_summary(path, shot.frames),
+        "margins": margins_summary(analysis),
         "runout": extents(rep.runout),
         "warnings": warnings,
         "collision": analysis.collision,

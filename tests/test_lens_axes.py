@@ -190,6 +190,27 @@ def test_metadata_and_summary_name_the_lens_axes(dolly: dict[str, Any]) -> None:
     assert "lens Cine zoom 24-290 mm T2.8" in info.stdout
 
 
+def test_the_lens_motors_have_position_margins_like_the_joints(
+        dolly: dict[str, Any]) -> None:
+    """The summary's (and the file's) nearest approach to a position limit covers the lens
+    motors: the decoded motor positions' smallest distance to the lens file's limits, at the
+    frame where it occurs (24 mm sits near the zoom's end stop)."""
+    lens = Lens.from_toml(ZOOM)
+    lim = lens.limits()
+    d = dolly["decoded"]
+    q = _at_frames(d)[:, 8:]
+    room = np.minimum(q - lim.lower, lim.upper - q)
+    for key in ("summary", "file"):
+        margins = (dolly["summary"]["margins"] if key == "summary"
+                   else json.loads(d["metadata"]["camtraj"]["margins"]))
+        for j, name in enumerate(lens.names):
+            k = int(np.argmin(room[:, j]))
+            assert margins["to_limits"][name] == pytest.approx(math.degrees(room[k, j]),
+                                                               abs=1e-9), (key, name)
+            assert margins["to_limits_frame"][name] == d["frames"][k], (key, name)
+    assert margins["to_limits"]["zoom"] < 5.0  # degrees of ring travel left at 24 mm
+
+
 def _lens_file(folder: Path, name: str, old: str, new: str) -> Path:
     assert old in ZOOM_TEXT
     path = folder / name

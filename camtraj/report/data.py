@@ -281,7 +281,7 @@ def from_analysis(
             frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
             tolerance=LIMIT_RTOL,
-            margins=None if path is None else margins_summary(path, shot.frames),
+            margins=None if path is None else margins_summary(analysis),
             edges={"runup": take.report.runup.get("peak_use", {}),
                    "runout": take.report.runout.get("peak_use", {})},
         )
@@ -552,7 +552,7 @@ def _margins_ok(m: Any) -> bool:
         return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
     return (isinstance(m, dict)
-            and all(isinstance(m.get(k), dict) and len(m[k]) == 8  # the joints: no lens
+            and all(isinstance(m.get(k), dict) and len(m[k]) >= 8  # the joints, the lens
                     and all(number(v) for v in m[k].values())
                     for k in ("to_limits", "to_limits_frame"))
             and all(number(m.get(k)) for k in ("wrist_singularity_deg", "wrist_singularity_frame",

@@ -147,7 +147,7 @@ def _closest_table(data: ReportData, m: dict[str, Any]) -> str:
             "<th>at frame</th></tr>"]
     for i, name in enumerate(data.joint_names):
         if name not in m["to_limits"]:
-            continue  # a lens motor: no IK margins
+            continue  # a file from before the lens motors had margins
         unit = "deg" if data.revolute[i] else "m"
         rows.append(f"<tr><td>{_e(name)}</td><td class='num'>{m['to_limits'][name]:.3f} "
                     f"{unit}</td><td class='num'>{m['to_limits_frame'][name]}</td></tr>")
