@@ -266,7 +266,9 @@ def time_shot(
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
-        retimed = optimal(path, limits, rate, speed_factor, ends=fastest[0])
+        fastest_factor = fastest[0]
+        del fastest  # its samples, unless they are the take's
+        retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
         if retimed is not None:
             shot_t, shot_x, shot, frame_idx = retimed
             del retimed
