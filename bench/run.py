@@ -13,7 +13,8 @@ comes with a ratio against a baseline measured in the same run:
    (``bench/ik_baselines.py``).
 3. End-to-end ``camtraj.convert.convert`` of the one-minute shot, split by stage, the MCAP
    writer's peak memory per film frame (tracemalloc), and the
-   ``camtraj convert`` command in a new process (start-up and imports included).
+   ``camtraj convert`` command in a new process (start-up and imports included). 3b:
+   convert's peak memory per film frame in each stage (tracemalloc) on a 10,000-frame shot.
 4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
 5. Maximum feasible speed (the timing stage's ``max_speed``) per shot of issue 13's shot set
    (``tests/shot_set.py``): the default objective vs ``paper`` vs the default at 10x effort vs
@@ -544,6 +545,69 @@ def writer_memory(shot: Path, options: Any, output: Path) -> dict[str, Any]:
             "mcap_bytes": output.stat().st_size}
 
 
+def convert_memory(work: Path, n_frames: int) -> dict[str, Any]:
+    """tracemalloc's peak in each stage of one ``convert`` (issue 14 §5) of make_samples' long
+    move spread over ``n_frames`` at FPS (table 3's move, slower), and what each stage found
+    held when it began, against the size of the take's servo-rate arrays (same run)."""
+    import tracemalloc
+    from contextlib import contextmanager
+
+    import camtraj.convert as conv
+
+    shot = load_make_samples().write_long_shot(work / f"memory_{n_frames}.usda",
+                                               n_frames=n_frames, fps=FPS)
+    stages: dict[str, dict[str, int]] = {}
+    plain = conv._stage
+    takes: list[Any] = []
+
+    @contextmanager
+    def measured(timings: dict[str, float], name: str) -> Any:
+        held = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        with plain(timings, name):
+            yield
+        stages[name] = {"held_bytes": held, "peak_bytes": tracemalloc.get_traced_memory()[1]}
+
+    real_analyse = conv.analyse
+
+    def analyse(*args: Any, **kwargs: Any) -> Any:
+        analysis = real_analyse(*args, **kwargs)
+        takes.append(analysis.take)
+        return analysis
+
+    conv._stage, conv.analyse = measured, analyse  # type: ignore[assignment]
+    tracemalloc.start()
+    try:
+        conv.convert(shot, work / "memory.mcap", conv.ConvertOptions())
+    except Exception as exc:
+        return {"skipped": f"convert failed: {type(exc).__name__}: {exc}"}
+    finally:
+        tracemalloc.stop()
+        conv._stage, conv.analyse = plain, real_analyse  # type: ignore[assignment]
+    take = takes[0]
+    arrays = sum(a.nbytes for a in (take.t, take.q, take.qd, take.qdd, take.qddd))
+    return {"frames": n_frames, "servo_samples": int(take.t.size), "stages": stages,
+            "take_array_bytes": arrays}
+
+
+def print_convert_memory(mem: dict[str, Any]) -> None:
+    if "skipped" in mem:
+        print(f"\n3b. convert's memory by stage: skipped: {mem['skipped']}")
+        return
+    n, take = mem["frames"], mem["take_array_bytes"]
+    rows = [[name, fmt(v["held_bytes"] / n / 1e3), fmt(v["peak_bytes"] / n / 1e3),
+             fmt(ratio(v["peak_bytes"], take))] for name, v in mem["stages"].items()]
+    table(
+        f"3b. convert's peak memory per film frame by stage (tracemalloc, one run of a "
+        f"{n}-frame shot, default options)",
+        ["stage", "held at start [KB/frame]", "peak [KB/frame]", "peak x take arrays"], rows,
+        [f"the take's servo-rate arrays (t, q, qd, qdd, qddd; {mem['servo_samples']} samples): "
+         f"{fmt(take / n / 1e3)} KB per film frame; the peak counts everything traced, what "
+         "was held when the stage began included; numpy's own allocations are traced, "
+         "USD's and the interpreter's start-up are not"],
+    )
+
+
 def print_convert(res: dict[str, Any], shot_seconds: float, bare_ik_s: float) -> None:
     if "skipped" in res:
         print(f"\n3. End-to-end convert: skipped: {res['skipped']}")
@@ -1018,6 +1082,10 @@ def main(argv: list[str] | None = None) -> int:
         results["convert"] = conv
         bare_ik = seq["shot"]["median_wall_s"] * targets.shape[0] / seq_targets.shape[0]
         print_convert(conv, targets.shape[0] / FPS, bare_ik)
+        log("table 3b: convert's memory by stage (tracemalloc)")
+        mem = convert_memory(work, 2000 if quick else 10_000)
+        results["convert_memory"] = mem
+        print_convert_memory(mem)
 
         speeds = bench_speeds(robot, args.base_rev, work, quick)
         results["speeds"] = speeds

@@ -13,6 +13,7 @@ Facts used:
 from __future__ import annotations
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -457,3 +458,45 @@ def test_a_minute_long_shot_in_every_mode(limits: Limits) -> None:
         assert_passes_frames(take, q)
         assert_rest_to_rest(take)
         assert_within_limits_by_differences(take, limits, jerk=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Memory
+# ---------------------------------------------------------------------------------------------
+
+
+def _timing_peak(q: Array, t: Array, limits: Limits, mode: str) -> tuple[int, int]:
+    """tracemalloc's peak [bytes] while ``time_shot`` runs, and the size of the take's
+    servo-rate arrays (times, positions, velocities, accelerations, jerks)."""
+    tracemalloc.start()
+    try:
+        take = time_shot(q, t, limits, mode=mode)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return peak, sum(a.nbytes for a in (take.t, take.q, take.qd, take.qdd, take.qddd))
+
+
+@pytest.mark.parametrize(("mode", "speed"), [("shot", 0.5), ("scale", 1.5)])
+def test_timing_memory_grows_by_little_more_than_the_take(
+    limits: Limits, mode: str, speed: float
+) -> None:
+    """Issue 14 §5: per servo sample, time_shot's peak grows by the take itself plus a
+    quarter of it (the shot's samples are joined to the run-up and run-out a quantity at a
+    time) and a few grid-sized temporaries: under 2 takes. It held three to five (the limit
+    checks' joined copy of the stream, the real-time stream kept beside the scale take, the
+    take joined while all of the shot was alive). ``speed``: the move's peak velocity use,
+    so that scale mode slows it."""
+    amp = np.array([3.0, 1.0, 0.3, 0.3, 0.5, 1.0, 0.5, 1.0])  # inside the ranges about HOME
+    periods = 2 * np.pi * amp / (speed * limits.velocity)  # peak velocity: speed x limit
+    time_shot(*sinusoid_path(240, amp, periods), limits, mode=mode)  # imports, caches
+    (small, small_take), (big, big_take) = (
+        _timing_peak(*sinusoid_path(n, amp, periods), limits, mode) for n in (2000, 4000))
+    growth = (big - small) / (big_take - small_take)
+    assert 1.0 <= growth < 2.0, growth
+
+
+def sinusoid_path(n: int, amp: Array, periods: Array) -> tuple[Array, Array]:
+    """Frames of every axis swinging about HOME with its own amplitude and period."""
+    t = frame_times(n)
+    return HOME + amp * np.sin(2 * np.pi * t[:, None] / periods), t

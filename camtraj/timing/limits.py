@@ -213,11 +213,14 @@ class FrameMap:
         hi = np.where(x > lo, np.minimum(lo + 1, n - 1), lo)
         return cls(lo=lo, hi=hi, numbers=numbers)
 
-    def spans(self, samples: IntArray) -> tuple[tuple[int, int], ...]:
-        """Inclusive runs ``(first, last)`` of film frame numbers touched by the samples."""
-        touched = np.zeros(self.numbers.size, dtype=bool)
+    def touch(self, touched: BoolArray, samples: IntArray) -> None:
+        """Mark in ``touched`` (one per frame index) the frames of the samples."""
         touched[self.lo[samples]] = True
         touched[self.hi[samples]] = True
+
+    def spans(self, touched: BoolArray) -> tuple[tuple[int, int], ...]:
+        """Inclusive runs ``(first, last)`` of the film frame numbers of the ``touched``
+        frame indices."""
         return tuple(
             (int(self.numbers[a]), int(self.numbers[b - 1])) for a, b in runs(touched)
         )
@@ -247,6 +250,13 @@ class Peaks:
         return cls(-_column_max(-s.q), _column_max(s.q), _column_max(np.abs(s.qd)),
                    _column_max(np.abs(s.qdd)), _column_max(np.abs(s.qddd)))
 
+    @classmethod
+    def join(cls, parts: list[Peaks]) -> Peaks:
+        """The extremes of samples given in parts, as :meth:`of` their concatenation."""
+        return cls(np.minimum.reduce([p.q_min for p in parts]),
+                   *(np.maximum.reduce([getattr(p, f) for p in parts])
+                     for f in ("q_max", "qd", "qdd", "qddd")))
+
     def use(self, limits: Limits) -> dict[str, Array]:
         """Fraction of every limit used, per quantity, each (8,) (see ``position_use``)."""
         pos = np.maximum(position_use(self.q_min, limits), position_use(self.q_max, limits))
@@ -273,7 +283,12 @@ def slowdown(s: Samples, limits: Limits) -> float:
     """
     if s.q.shape[0] == 0:
         return 0.0
-    use = Peaks.of(s).use(limits)
+    return peaks_slowdown(Peaks.of(s), limits)
+
+
+def peaks_slowdown(peaks: Peaks, limits: Limits) -> float:
+    """:func:`slowdown` of the samples with these peaks."""
+    use = peaks.use(limits)
     kv, ka, kj = (float(use[k].max()) for k in ("velocity", "acceleration", "jerk"))
     return max(kv, math.sqrt(ka), math.pow(kj, 1.0 / 3.0))
 
@@ -282,30 +297,43 @@ def violations(
     s: Samples, limits: Limits, frame_map: FrameMap, rtol: float
 ) -> list[LimitViolation]:
     """Every (axis, quantity) exceeding its limit by more than ``rtol``, worst first."""
+    return violations_in([(s, frame_map)], limits, rtol)
+
+
+def violations_in(
+    parts: list[tuple[Samples, FrameMap]], limits: Limits, rtol: float
+) -> list[LimitViolation]:
+    """:func:`violations` of samples given in parts, each with its frame map (of the same
+    frames), as of their concatenation (the first of equally bad samples is named); the
+    parts are not joined, so no copy of them is made."""
     out: list[LimitViolation] = []
     revolute = limits.revolute
-    use = Peaks.of(s).use(limits)
-    for j in np.flatnonzero(use["position"] > 1.0 + rtol).tolist():
-        mid = 0.5 * (limits.upper[j] + limits.lower[j])
-        pos_use = np.abs(s.q[:, j] - mid) / (0.5 * (limits.upper[j] - limits.lower[j]))
-        over = np.flatnonzero(pos_use > 1.0 + rtol)
-        k = int(over[np.argmax(pos_use[over])])
-        peak = float(s.q[k, j])
-        bound = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
-        out.append(LimitViolation(
-            axis=limits.names[j], quantity="position", peak=peak, limit=bound,
-            ratio=float(pos_use[k]), frames=frame_map.spans(over), revolute=bool(revolute[j]),
-        ))
-    for quantity, values in (("velocity", s.qd), ("acceleration", s.qdd), ("jerk", s.qddd)):
+    use = Peaks.join([Peaks.of(s) for s, _ in parts]).use(limits)
+    for quantity, field in zip(QUANTITIES, ("q", "qd", "qdd", "qddd"), strict=True):
         for j in np.flatnonzero(use[quantity] > 1.0 + rtol).tolist():
-            lim = float(limits.bound(quantity)[j])
-            ratio = np.abs(values[:, j]) / lim
-            over = np.flatnonzero(ratio > 1.0 + rtol)
-            k = int(over[np.argmax(ratio[over])])
+            if quantity == "position":
+                mid = 0.5 * (limits.upper[j] + limits.lower[j])
+                half = 0.5 * (limits.upper[j] - limits.lower[j])
+            else:
+                lim = float(limits.bound(quantity)[j])
+            touched = np.zeros(parts[0][1].numbers.size, dtype=bool)
+            ratio_k, peak = -math.inf, math.nan
+            for s, frame_map in parts:
+                values = getattr(s, field)[:, j]
+                ratio = (np.abs(values - mid) / half if quantity == "position"
+                         else np.abs(values) / lim)
+                over = np.flatnonzero(ratio > 1.0 + rtol)
+                if over.size == 0:
+                    continue
+                k = int(over[np.argmax(ratio[over])])
+                if ratio[k] > ratio_k:
+                    ratio_k, peak = float(ratio[k]), float(values[k])
+                frame_map.touch(touched, over)
+            if quantity == "position":
+                lim = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
             out.append(LimitViolation(
-                axis=limits.names[j], quantity=quantity, peak=float(values[k, j]), limit=lim,
-                ratio=float(ratio[k]), frames=frame_map.spans(over),
-                revolute=bool(revolute[j]),
+                axis=limits.names[j], quantity=quantity, peak=peak, limit=lim, ratio=ratio_k,
+                frames=parts[0][1].spans(touched), revolute=bool(revolute[j]),
             ))
     out.sort(key=lambda v: (v.quantity != "position", -v.speed_needed if
                             math.isfinite(v.speed_needed) else -v.ratio))

@@ -64,6 +64,8 @@ POINTS_PER_FRAME = 6
 #: it looks around the worst of them.
 CHECK_PER_FRAME = 48
 REFINE = 16
+#: Points the check evaluates at once (about 1.5 KB of temporaries each).
+NEED_BLOCK = 8192
 #: The check's slow-down is raised by this fraction (what the fine grid can miss).
 CHECK_RTOL = 1e-5
 #: Stop the sequential programs when the time improves by less than this fraction.
@@ -547,10 +549,24 @@ def _overshoot(path: FramePath, law: _TimeLaw, limits: Limits) -> tuple[float, A
 
 def _need(path: FramePath, law: _TimeLaw, limits: Limits, x: Array,
           p3: Array | None = None) -> Array:
-    """Per point, the uniform slow-down the law needs there (inf where it does not move)."""
+    """Per point, the uniform slow-down the law needs there (inf everywhere if it stops
+    anywhere); :data:`NEED_BLOCK` points at a time, so its temporaries stay bounded."""
+    out = np.empty(x.size)
+    for i in range(0, x.size, NEED_BLOCK):
+        part = slice(i, i + NEED_BLOCK)
+        need = _need_block(path, law, limits, x[part], None if p3 is None else p3[part])
+        if need is None:
+            return np.full(x.size, math.inf)
+        out[part] = need
+    return out
+
+
+def _need_block(path: FramePath, law: _TimeLaw, limits: Limits, x: Array,
+                p3: Array | None) -> Array | None:
+    """:func:`_need` of some points; None where the law does not move at one of them."""
     u, u1, u2 = law.derivs(x)
     if np.any(u <= 0.0):
-        return np.full(x.size, math.inf)
+        return None
     v = np.sqrt(2.0 * u)
     s = _timed(path, x, v, u1, u2 * v, p3=p3)
     kv = np.max(np.abs(s.qd) / limits.velocity, axis=1)

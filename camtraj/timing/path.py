@@ -189,8 +189,12 @@ class FramePath:
         powers = tau[:, None] ** np.maximum(k[None, :] - np.arange(4)[:, None, None], 0)
         basis = np.where(k >= np.arange(4)[:, None, None], fac[:, None, :] * powers, 0.0)
         end = fac @ self.coef[-1]  # tau = 1 on the last piece, (4, 8)
-        out = [np.concatenate([np.matmul(basis[d], self.coef).reshape(-1, m), end[d : d + 1]])
-               for d in range(4)]
+        out = []
+        for d in range(4):  # each written in place: no temporary of the grid's size
+            values = np.empty(((n - 1) * ticks + 1, m))
+            np.matmul(basis[d], self.coef, out=values[:-1].reshape(n - 1, ticks, m))
+            values[-1] = end[d]
+            out.append(values)
         pos = out[0][:-1].reshape(n - 1, ticks, m)
         np.clip(pos, self.piece_lo[:, None], self.piece_hi[:, None], out=pos)
         out[0][::ticks] = self.q_frames
@@ -219,7 +223,10 @@ class FramePath:
     def timed_grid(self, ticks: int, xd: float) -> tuple[Array, Samples]:
         """Samples at constant path speed ``xd`` [frames/s] on ``ticks`` steps per frame."""
         x, (p0, p1, p2, p3) = self.on_grid(ticks)
-        return x, Samples(q=p0, qd=p1 * xd, qdd=p2 * xd**2, qddd=p3 * xd**3)
+        p1 *= xd  # in place: the grid's arrays become the samples
+        p2 *= xd**2
+        p3 *= xd**3
+        return x, Samples(q=p0, qd=p1, qdd=p2, qddd=p3)
 
 
 def _timed(p: list[Array], xd: Array, xdd: Array, *, jerk_by_difference: bool = False,

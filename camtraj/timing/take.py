@@ -33,9 +33,10 @@ from camtraj.timing.limits import (
     TimingLimitError,
     fmt,
     peak_use,
+    peaks_slowdown,
     shot_error,
-    slowdown,
     violations,
+    violations_in,
 )
 from camtraj.timing.optimal import optimal
 from camtraj.timing.path import FramePath, Samples
@@ -213,7 +214,9 @@ def time_shot(
         msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
         raise ValueError(msg)
     start_q = None if start is None else _validate_start(start, limits.size)
-    real = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames)
+    # the real-time grid is kept only where it is the take's stream
+    real, grid = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames,
+                              keep=mode == "shot")
     edge_note = []
     if real.edges != edges:
         cost = (f"a {real.gentle_need / real.need:.2f}x slower take"
@@ -221,11 +224,8 @@ def time_shot(
         edge_note.append(f"a gentle run-up/run-out would need {cost}: the ends use the full "
                          "acceleration and jerk limits (as --edges fast)")
         edges = real.edges
-    path, rt_x, rt, rt_checked, rt_checked_x = (real.path, real.x, real.stream, real.checked,
-                                                real.checked_x)
-    fit, need, max_speed = real.fit, real.need, real.max_speed
-    ticks0 = real.ticks
-    limiting = violations(rt_checked, limits, FrameMap.of(rt_checked_x, frames), LIMIT_RTOL)
+    path, fit, need, max_speed = real.path, real.fit, real.need, real.max_speed
+    ticks0, limiting = real.ticks, real.limiting
     position_bad = [v for v in limiting if v.quantity == "position"]
     if position_bad:
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
@@ -238,9 +238,11 @@ def time_shot(
         problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
         if limiting or problem is not None:
             raise _shot_mode_error(limiting, problem, max_speed, fps, scaled)
-        shot, shot_x, speed_factor, ticks = rt, rt_x, 1.0, ticks0
+        assert grid is not None
+        shot, shot_x, speed_factor, ticks = grid.stream, grid.x, 1.0, ticks0
+        del grid  # its samples before the frames are views of the stream
         shot_rate = ticks0 * fps
-        shot_t = np.arange(rt_x.size) / shot_rate
+        shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         try:
             up, out = _build_edges(shot, limits, edges, start_q, 1.0 / shot_rate, frames)
@@ -264,20 +266,23 @@ def time_shot(
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
-        retimed = optimal(path, limits, rate, speed_factor, ends=fastest[0])
+        fastest_factor = fastest[0]
+        del fastest  # its samples, unless they are the take's
+        retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
         if retimed is not None:
             shot_t, shot_x, shot, frame_idx = retimed
+            del retimed
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
             ticks = 0  # samples per frame vary
             shot_rate = 0.0
             up, out = _build_edges(shot, limits, edges, start_q, 1.0 / rate, frames)
 
     # Position limits of the shot part as sampled in the take.
-    take_frames = FrameMap.of(shot_x, frames)
-    pos_bad = [v for v in violations(shot, limits, take_frames, LIMIT_RTOL)
+    pos_bad = [v for v in violations(shot, limits, FrameMap.of(shot_x, frames), LIMIT_RTOL)
                if v.quantity == "position"]
     if pos_bad:
         raise shot_error(pos_bad, max_speed, fps)
+    use, position_range = peak_use(shot, limits)
 
     # Run-up and run-out on a uniform servo grid (step of the shot part in uniform modes).
     step = 1.0 / shot_rate if shot_rate > 0 else 1.0 / rate
@@ -295,14 +300,16 @@ def time_shot(
         t = np.arange(m) * step
         eff_rate = shot_rate
         uniform = True
-    q_all = np.concatenate([up.q, shot.q, out.q])
-    qd_all = np.concatenate([up.qd, shot.qd, out.qd])
-    qdd_all = np.concatenate([up.qdd, shot.qdd, out.qdd])
-    qddd_all = np.concatenate([up.qddd, shot.qddd, out.qddd])
+    # Run-up, shot and run-out joined a quantity at a time, each of the shot's dropped once
+    # joined: the shot's samples and the take's are never both whole in memory.
+    columns = [shot.q, shot.qd, shot.qdd, shot.qddd]
+    del shot
+    q_all, qd_all, qdd_all, qddd_all = (
+        np.concatenate([getattr(up, f), columns.pop(0), getattr(out, f)])
+        for f in ("q", "qd", "qdd", "qddd"))
     frame_samples = (n_up + frame_idx).astype(np.int64)
     frame_times_take = t[frame_samples]
 
-    use, position_range = peak_use(shot, limits)
     report = TimingReport(
         peak_use=use,
         position_range=position_range,
@@ -345,14 +352,12 @@ def time_shot(
 
 @dataclass(frozen=True, eq=False)
 class _RealTime:
-    """The shot at its own timing, sampled at the servo rate, and the slow-down it needs."""
+    """What the shot at its own timing, sampled at the servo rate, tells: the limits it
+    exceeds and the slow-down it needs (no servo-rate arrays)."""
 
     path: FramePath
     ticks: int
-    x: Array
-    stream: Samples
-    checked: Samples
-    checked_x: Array
+    limiting: list[LimitViolation]
     fit: _EdgeFit
     shot_need: float
     need: float
@@ -363,24 +368,27 @@ class _RealTime:
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
            edges: str, start: Array | None, frames: IntArray,
-           precision: float = FACTOR_RTOL) -> _RealTime:
+           precision: float = FACTOR_RTOL, *,
+           keep: bool = False) -> tuple[_RealTime, _Grid | None]:
+        """The check, and with ``keep`` its servo grid (else dropped here)."""
         path = FramePath.fit(q, dt, limits.lower, limits.upper, hold)
         ticks = max(1, round(rate * dt))
-        x, stream, checked, checked_x = _grid_samples(path, ticks, 1.0 / dt)
-        fit = _EdgeFit.of(path, stream, limits, edges, start, frames)
+        grid = _Grid.of(path, ticks, 1.0 / dt)
+        fit = _EdgeFit.of(path, grid.stream, limits, edges, start, frames)
         # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
-        shot_need = slowdown(checked, limits)
+        shot_need = grid.slowdown(limits)
+        limiting = grid.violations(limits, frames)
         need = gentle_need = fit.factor(shot_need, precision)
         if edges == "gentle" and need > shot_need * (1.0 + LIMIT_RTOL):
             # Gentle ends are worth no slower take: where they would force one, the ends
             # use the full limits (the take a crew can shoot comes first).
-            fast = _EdgeFit.of(path, stream, limits, "fast", start, frames)
+            fast = _EdgeFit.of(path, grid.stream, limits, "fast", start, frames)
             fast_need = fast.factor(shot_need, precision)
             if fast_need < need * (1.0 - LIMIT_RTOL):
                 fit, need, edges = fast, fast_need, "fast"
         max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
-        return cls(path, ticks, x, stream, checked, checked_x, fit, shot_need, need, max_speed,
-                   edges, gentle_need)
+        return (cls(path, ticks, limiting, fit, shot_need, need, max_speed, edges, gentle_need),
+                grid if keep else None)
 
 
 def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
@@ -395,10 +403,9 @@ def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, 
     :data:`FACTOR_RTOL`, what ``time_shot`` uses); a coarser one costs less and never reports
     a faster speed than the exact one."""
     q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate, limits)
-    rt = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
-                      frames, FACTOR_RTOL if precision is None else precision)
-    if any(v.quantity == "position" for v in
-           violations(rt.checked, limits, FrameMap.of(rt.checked_x, frames), LIMIT_RTOL)):
+    rt, _ = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
+                         frames, FACTOR_RTOL if precision is None else precision)
+    if any(v.quantity == "position" for v in rt.limiting):
         return 0.0
     return rt.max_speed
 
@@ -453,22 +460,34 @@ def _validate(
 
 
 
-def _grid_samples(path: FramePath, ticks: int, speed: float) -> tuple[Array, Samples, Samples,
-                                                                        Array]:
-    """The path at constant speed [frames/s] on ``ticks`` steps per frame, and the samples
-    the limit checks see: the stream plus the jerk just before every frame (the jerk may
-    step at a frame next to a hold or a knot kept inside the position range).
+@dataclass(frozen=True, eq=False)
+class _Grid:
+    """The path at constant speed on a servo grid: the stream, and the samples the limit
+    checks see besides: the jerk just before every frame (it may step at a frame next to a
+    hold or a knot kept inside the position range). Checked in two parts, never joined."""
 
-    Returns: the stream's frame coordinates and samples, the checked samples and their
-    frame coordinates.
-    """
-    x, stream = path.timed_grid(ticks, speed)
-    k = slice(ticks, None, ticks)  # frames 1..n-1
-    before = Samples(stream.q[k], stream.qd[k], stream.qdd[k],
-                     path.knot_jerk_from_left() * speed**3)
-    checked = Samples.join([stream, before])
-    checked_x = np.concatenate([x, x[k] - 0.5 / ticks])
-    return x, stream, checked, checked_x
+    x: Array
+    stream: Samples
+    before_x: Array
+    before: Samples  # frames 1..n-1; positions to accelerations are views of the stream's
+
+    @classmethod
+    def of(cls, path: FramePath, ticks: int, speed: float) -> _Grid:
+        """At ``speed`` [frames/s] on ``ticks`` steps per frame."""
+        x, stream = path.timed_grid(ticks, speed)
+        k = slice(ticks, None, ticks)  # frames 1..n-1
+        before = Samples(stream.q[k], stream.qd[k], stream.qdd[k],
+                         path.knot_jerk_from_left() * speed**3)
+        return cls(x, stream, x[k] - 0.5 / ticks, before)
+
+    def slowdown(self, limits: Limits) -> float:
+        return peaks_slowdown(Peaks.join([Peaks.of(self.stream), Peaks.of(self.before)]),
+                              limits)
+
+    def violations(self, limits: Limits, frames: IntArray) -> list[LimitViolation]:
+        return violations_in([(self.stream, FrameMap.of(self.x, frames)),
+                              (self.before, FrameMap.of(self.before_x, frames))],
+                             limits, LIMIT_RTOL)
 
 
 def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
@@ -509,7 +528,9 @@ class _EdgeFit:
     @classmethod
     def of(cls, path: FramePath, rt: Samples, limits: Limits, edges: str, start: Array | None,
            frames: IntArray) -> _EdgeFit:
-        ends = ((rt.q[0], rt.qd[0], rt.qdd[0]), (rt.q[-1], rt.qd[-1], rt.qdd[-1]))
+        # copies: a view would keep the whole stream alive
+        ends = ((rt.q[0].copy(), rt.qd[0].copy(), rt.qdd[0].copy()),
+                (rt.q[-1].copy(), rt.qd[-1].copy(), rt.qdd[-1].copy()))
         peaks = Peaks.of(rt)
         return cls(ends, peaks.qdd, peaks.qddd, limits, edges, start,
                    (int(frames[0]), int(frames[-1])))
@@ -644,19 +665,22 @@ def _scale(
     frames = np.array(fit.frames, dtype=np.int64)
     for _ in range(40):
         ticks = max(1, round(rate * s * dt))
-        x, samples, checked, _ = _grid_samples(path, ticks, 1.0 / (s * dt))
-        k = slowdown(checked, limits)
+        grid = _Grid.of(path, ticks, 1.0 / (s * dt))
+        k = grid.slowdown(limits)
         if k > 1.0 + LIMIT_RTOL:
             s *= k * (1.0 + 1e-12)
+            del grid  # before the next one is made
             continue
         try:
-            up, out = _build_edges(samples, limits, fit.edges, start, s * dt / ticks, frames)
+            up, out = _build_edges(grid.stream, limits, fit.edges, start, s * dt / ticks,
+                                   frames)
         except TimingLimitError as exc:
             if s >= MAX_SCALE:
                 raise TimingLimitError(fit.no_room(), max_speed=0.0, feasible_fps=0.0,
                                        scale_factor=math.inf) from exc
             s = min(MAX_SCALE, s * 1.001)
+            del grid
             continue
-        return s, ticks, samples, x, up, out
+        return s, ticks, grid.stream, grid.x, up, out
     msg = "internal error: the scale factor did not settle"  # pragma: no cover
     raise RuntimeError(msg)  # pragma: no cover
