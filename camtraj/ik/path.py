@@ -228,19 +228,10 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
 
     runs = []
     for n_track, n_extend in grids:
-        cand = candidates(robot, targets, n_track, n_extend)
-        cand = _rescue_empty_frames(robot, targets, cand, frames)
-        choice = choose(cost, cand, start)
-        if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
-            msg = "internal error: no candidate path through the shot"
-            raise RuntimeError(msg)
+        branch, x0, y0, lo1, hi1 = _programme(robot, cost, targets, start, frames, n_track,
+                                              n_extend)
         step()
-        rows = np.arange(n)
-        x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
-        j = cand.interval[rows, choice.point]
-        lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
-        run = Refinement(robot, cost, targets, choice.branch, x0, choice.y,
-                         np.minimum(lo1, x0[:, 0]), np.maximum(hi1, x0[:, 0]),
+        run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
                          rounds=s.refine_rounds, tolerance=s.refine_tolerance,
                          take_speed=take_speed)
         run.stage()
@@ -255,6 +246,27 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
             r.stage()
         step()
     return max((r.result() for r in going), key=lambda ref: ref.speed).y[:, :8]
+
+
+def _programme(robot: Robot, cost: ShotCost, targets: Array, start: Array,
+               frames: NDArray[np.int_], n_track: int,
+               n_extend: int) -> tuple[NDArray[np.intp], Array, Array, Array, Array]:
+    """The dynamic programme's answer on a candidate grid, as a refinement's start: branch
+    per frame, track/extend (n, 2), measures (n, 10) and the track interval each frame stays
+    in (its candidates are freed on return: they are the solver's largest arrays)."""
+    n = targets.shape[0]
+    cand = candidates(robot, targets, n_track, n_extend)
+    cand = _rescue_empty_frames(robot, targets, cand, frames)
+    choice = choose(cost, cand, start)
+    if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
+        msg = "internal error: no candidate path through the shot"
+        raise RuntimeError(msg)
+    rows = np.arange(n)
+    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
+    j = cand.interval[rows, choice.point]
+    lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
+    return (choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
+            np.maximum(hi1, x0[:, 0]))
 
 
 def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,

@@ -419,7 +419,7 @@ def _solve_banded(H: Array, g: Array, mu: float) -> Array:
     return np.asarray(solveh_banded(ab, rhs, check_finite=False)).reshape(g.shape)
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=2)  # per path length: the solve's own, not kept for long
 def _band_index(n: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Where each stored scalar of H (n, width, 2, 2) goes in the upper band form of
     ``solveh_banded`` (flat indices into ab (2 width, 2 n) and into H), for the scalars

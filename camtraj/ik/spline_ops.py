@@ -97,7 +97,7 @@ def _responses(n: int) -> dict[tuple[int, float], Array]:
     return out
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=4)  # per path length: the solve's own, not kept for long
 def spline_ops(n: int) -> BandOps:
     """The six operators (orders 1-3 at knots and at piece middles, in that order: velocity
     at knots, at middles, acceleration at knots, ...) for a path of n >= 3 frames, side by
