@@ -50,6 +50,7 @@ COARSE_FRAMES = 12  # frames solved per candidate in the coarse stages
 COARSE_KEEP = 24  # at most this many survivors of the cheap tests solved on the subsample
 REFINE = ((2, 0.5), (2, 0.25), (1, 0.125))  # (best placements refined, fraction of the step)
 FULL_KEEP = 3  # placements solved on every frame (at least; --top more)
+SCENE_FULL_KEEP = 3  # a scene's placements raced on every frame (the best solved for all)
 YAW_STEP_DEG = 15.0
 _SPEED_CAP = 100.0
 
@@ -295,6 +296,11 @@ class Layout:
         keys = [r.key() for r in self.results.values()]
         return tuple(min(k) for k in zip(*keys, strict=True)) if keys else _UNSOLVED
 
+    def rank(self) -> tuple[float, ...]:
+        """:meth:`key`, ties broken by the position: a total order of the placements, so what
+        the search keeps never depends on the order in which solves finish."""
+        return (*self.key(), -self.x, -self.y, -self.yaw_deg)
+
     def next_shot(self) -> int:
         return next(i for i in self.order if i not in self.results)
 
@@ -305,8 +311,8 @@ class Layout:
 
     def worst_first(self) -> tuple[int, ...]:
         """The shots in the order of their results, worst first (for the next stage)."""
-        return tuple(sorted(self.order, key=lambda i: self.results[i].key()
-                            if i in self.results else _UNSOLVED))
+        return tuple(sorted(self.order, key=lambda i: (self.results[i].key()
+                            if i in self.results else _UNSOLVED, i)))
 
     def base2world(self, z: float) -> Array:
         return pose(self.x, self.y, z, self.yaw_deg)
@@ -316,18 +322,23 @@ def _race(runner: _Runner, layouts: list[Layout], strides: dict[int, int], need:
     """Solve the layouts' shots until the ``need`` best complete layouts are known.
 
     Placements no shot has been solved at go first, all together (one shot each); then the
-    open placement with the best bound gets its next shot, ``jobs`` at a time. A placement
-    stops once its bound is no better than the ``need``-th best complete key: the worst of the
-    shots solved already rules it out, so its other shots are never solved.
+    open placements with the best bounds get their next shot, ``jobs`` at a time. A placement
+    stops once its bound is no better than the ``need``-th best complete rank: the worst of
+    the shots solved already rules it out, so its other shots are never solved.
+
+    Bounds only fall as shots are solved and :meth:`Layout.rank` orders every placement
+    (no ties), so the ``need`` best complete layouts are the ``need`` best of all the layouts
+    whatever the number of jobs and the order the solves finish in: only the solve count
+    depends on them. The caller uses no more than the ``need`` best.
     """
     while True:
-        done = sorted((lay.key() for lay in layouts if lay.complete), reverse=True)
+        done = sorted((lay.rank() for lay in layouts if lay.complete), reverse=True)
         bar = done[need - 1] if len(done) >= need else None
-        open_ = [lay for lay in layouts if not lay.complete and (bar is None or lay.key() > bar)]
+        open_ = [lay for lay in layouts if not lay.complete and (bar is None or lay.rank() > bar)]
         if not open_:
             return
         todo = [lay for lay in open_ if not lay.results] or sorted(
-            open_, key=Layout.key, reverse=True)[:runner.jobs]
+            open_, key=Layout.rank, reverse=True)[:runner.jobs]
         tasks = [(lay.next_shot(), lay.x, lay.y, lay.yaw_deg, strides[lay.next_shot()])
                  for lay in todo]
         for lay, task, result in zip(todo, tasks, runner.run(tasks), strict=True):
@@ -544,13 +555,15 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
     picked = _spread(order, cand, keep, scr.step, scr.yaw_step)
     strides = {i: _subsample(problems[i])[0] for i in shots}
     single = len(shots) == 1
-    need = max(FULL_KEEP, top) if single else 1  # a scene: only the best is refined further
+    finals = max(FULL_KEEP, top) if single else SCENE_FULL_KEEP
+    needs = [keep for keep, _ in REFINE[1:]] + [finals]  # each race: what the next stage takes
     layouts = [Layout(float(cand[i, 0]), float(cand[i, 1]), float(cand[i, 2]),
                       tuple(shots[j] for j in np.argsort(slack[i], kind="stable")))
                for i in picked]
-    _race(runner, layouts, strides, need)
+    _race(runner, layouts, strides, REFINE[0][0])
     yaw_lo, yaw_hi = scr.yaw_range
-    for keep, frac in REFINE:  # pattern search: +-x, +-y, +-yaw around the best few
+    # pattern search: +-x, +-y, +-yaw around the best few
+    for (keep, frac), need in zip(REFINE, needs, strict=True):
         best = _distinct(_ranked(layouts), keep)
         h, hy = scr.step * frac, scr.yaw_step * frac
         steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0), (0, -h, 0)]
@@ -570,8 +583,7 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
                 seen.add(_where(lay))
                 layouts.append(lay)
         _race(runner, layouts, strides, need)
-    ranked = _ranked(layouts)
-    finalists = _distinct(ranked, max(FULL_KEEP, min(top, len(ranked))))
+    finalists = _distinct(_ranked(layouts), finals)
     full = [Layout(r.x, r.y, r.yaw_deg, r.worst_first()) for r in finalists]
     _race(runner, full, dict.fromkeys(shots, 1), len(full) if single else 1)
     return _ranked(full)[:top], len(scr.grid), scr.info
@@ -583,7 +595,7 @@ def _where(lay: Layout) -> tuple[float, float, float]:
 
 def _ranked(layouts: list[Layout]) -> list[Layout]:
     """The complete layouts, best first."""
-    return sorted((lay for lay in layouts if lay.complete), key=Layout.key, reverse=True)
+    return sorted((lay for lay in layouts if lay.complete), key=Layout.rank, reverse=True)
 
 
 def _distinct(ranked: list[Layout], k: int) -> list[Layout]:
