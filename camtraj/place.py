@@ -50,6 +50,7 @@ COARSE_FRAMES = 12  # frames solved per candidate in the coarse stages
 COARSE_KEEP = 24  # at most this many survivors of the cheap tests solved on the subsample
 REFINE = ((2, 0.5), (2, 0.25), (1, 0.125))  # (best placements refined, fraction of the step)
 FULL_KEEP = 3  # placements solved on every frame (at least; --top more)
+SCENE_FULL_KEEP = 2  # a scene's placements raced on every frame (the best solved for all)
 YAW_STEP_DEG = 15.0
 _SPEED_CAP = 100.0
 
@@ -83,6 +84,7 @@ class Problem:
     clearance: float = 0.0
     name: str = ""  # the shot, for messages
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
+    lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
 
 
 @dataclass(frozen=True)
@@ -203,8 +205,12 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     except CamtrajError as exc:
         return Result(x, y, yaw_deg, full, 0.0, False, False, 0.0, "", {}, str(exc))
     marg = margins(robot, path.q)
+    q_time, limits = path.q, Limits.from_robot(robot)
+    if robot.lens is not None and problem.lens_q is not None:  # as convert times them
+        q_time = np.hstack([q_time, problem.lens_q[idx]])
+        limits = limits.joined(robot.lens.limits())
     try:
-        take = time_shot(path.q, times, Limits.from_robot(robot), mode="scale",
+        take = time_shot(q_time, times, limits, mode="scale",
                          rate=problem.rate if full else min(problem.rate, 100.0),
                          frame_numbers=frames)
     except TimingLimitError as exc:
@@ -217,8 +223,9 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     if problem.obstacles:
         model = _model(problem)
         if full:
-            s = take_samples(robot, take.q, take.frame_samples)
-            q, tcs = take.q[s], sample_times(take.t[s], take.frame_times, problem.time_codes)
+            joints = take.q[:, :len(JOINT_NAMES)]
+            s = take_samples(robot, joints, take.frame_samples)
+            q, tcs = joints[s], sample_times(take.t[s], take.frame_times, problem.time_codes)
             at = np.searchsorted(take.frame_times, take.t[s] - 1e-12).clip(0, len(idx) - 1)
             sample_frames = frames[at]
         else:
@@ -295,6 +302,11 @@ class Layout:
         keys = [r.key() for r in self.results.values()]
         return tuple(min(k) for k in zip(*keys, strict=True)) if keys else _UNSOLVED
 
+    def rank(self) -> tuple[float, ...]:
+        """:meth:`key`, ties broken by the position: a total order of the placements, so what
+        the search keeps never depends on the order in which solves finish."""
+        return (*self.key(), -self.x, -self.y, -self.yaw_deg)
+
     def next_shot(self) -> int:
         return next(i for i in self.order if i not in self.results)
 
@@ -305,8 +317,8 @@ class Layout:
 
     def worst_first(self) -> tuple[int, ...]:
         """The shots in the order of their results, worst first (for the next stage)."""
-        return tuple(sorted(self.order, key=lambda i: self.results[i].key()
-                            if i in self.results else _UNSOLVED))
+        return tuple(sorted(self.order, key=lambda i: (self.results[i].key()
+                            if i in self.results else _UNSOLVED, i)))
 
     def base2world(self, z: float) -> Array:
         return pose(self.x, self.y, z, self.yaw_deg)
@@ -316,18 +328,23 @@ def _race(runner: _Runner, layouts: list[Layout], strides: dict[int, int], need:
     """Solve the layouts' shots until the ``need`` best complete layouts are known.
 
     Placements no shot has been solved at go first, all together (one shot each); then the
-    open placement with the best bound gets its next shot, ``jobs`` at a time. A placement
-    stops once its bound is no better than the ``need``-th best complete key: the worst of the
-    shots solved already rules it out, so its other shots are never solved.
+    open placements with the best bounds get their next shot, ``jobs`` at a time. A placement
+    stops once its bound is no better than the ``need``-th best complete rank: the worst of
+    the shots solved already rules it out, so its other shots are never solved.
+
+    Bounds only fall as shots are solved and :meth:`Layout.rank` orders every placement
+    (no ties), so the ``need`` best complete layouts are the ``need`` best of all the layouts
+    whatever the number of jobs and the order the solves finish in: only the solve count
+    depends on them. The caller uses no more than the ``need`` best.
     """
     while True:
-        done = sorted((lay.key() for lay in layouts if lay.complete), reverse=True)
+        done = sorted((lay.rank() for lay in layouts if lay.complete), reverse=True)
         bar = done[need - 1] if len(done) >= need else None
-        open_ = [lay for lay in layouts if not lay.complete and (bar is None or lay.key() > bar)]
+        open_ = [lay for lay in layouts if not lay.complete and (bar is None or lay.rank() > bar)]
         if not open_:
             return
         todo = [lay for lay in open_ if not lay.results] or sorted(
-            open_, key=Layout.key, reverse=True)[:runner.jobs]
+            open_, key=Layout.rank, reverse=True)[:runner.jobs]
         tasks = [(lay.next_shot(), lay.x, lay.y, lay.yaw_deg, strides[lay.next_shot()])
                  for lay in todo]
         for lay, task, result in zip(todo, tasks, runner.run(tasks), strict=True):
@@ -544,13 +561,15 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
     picked = _spread(order, cand, keep, scr.step, scr.yaw_step)
     strides = {i: _subsample(problems[i])[0] for i in shots}
     single = len(shots) == 1
-    need = max(FULL_KEEP, top) if single else 1  # a scene: only the best is refined further
+    finals = max(FULL_KEEP, top) if single else SCENE_FULL_KEEP
+    needs = [keep for keep, _ in REFINE[1:]] + [finals]  # each race: what the next stage takes
     layouts = [Layout(float(cand[i, 0]), float(cand[i, 1]), float(cand[i, 2]),
                       tuple(shots[j] for j in np.argsort(slack[i], kind="stable")))
                for i in picked]
-    _race(runner, layouts, strides, need)
+    _race(runner, layouts, strides, REFINE[0][0])
     yaw_lo, yaw_hi = scr.yaw_range
-    for keep, frac in REFINE:  # pattern search: +-x, +-y, +-yaw around the best few
+    # pattern search: +-x, +-y, +-yaw around the best few
+    for (keep, frac), need in zip(REFINE, needs, strict=True):
         best = _distinct(_ranked(layouts), keep)
         h, hy = scr.step * frac, scr.yaw_step * frac
         steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0), (0, -h, 0)]
@@ -570,8 +589,7 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
                 seen.add(_where(lay))
                 layouts.append(lay)
         _race(runner, layouts, strides, need)
-    ranked = _ranked(layouts)
-    finalists = _distinct(ranked, max(FULL_KEEP, min(top, len(ranked))))
+    finalists = _distinct(_ranked(layouts), finals)
     full = [Layout(r.x, r.y, r.yaw_deg, r.worst_first()) for r in finalists]
     _race(runner, full, dict.fromkeys(shots, 1), len(full) if single else 1)
     return _ranked(full)[:top], len(scr.grid), scr.info
@@ -583,7 +601,7 @@ def _where(lay: Layout) -> tuple[float, float, float]:
 
 def _ranked(layouts: list[Layout]) -> list[Layout]:
     """The complete layouts, best first."""
-    return sorted((lay for lay in layouts if lay.complete), key=Layout.key, reverse=True)
+    return sorted((lay for lay in layouts if lay.complete), key=Layout.rank, reverse=True)
 
 
 def _distinct(ranked: list[Layout], k: int) -> list[Layout]:
@@ -620,13 +638,18 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
     from camtraj.convert import load_shot
 
     shot = load_shot(shot_path, options)
+    lens_q = None
+    if robot.lens is not None:  # a frame beyond the lens's calibration is an error up front
+        from camtraj.lens import lens_positions
+
+        lens_q = lens_positions(robot.lens, shot)
     obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
     base_z = sf.floor_height * shot.meters_per_unit
     problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),
                       np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
                       obstacles=tuple(obstacles),
                       clearance=sf.clearance_m if clearance is None else clearance,
-                      name=one_line(shot_path), timing=timing)
+                      name=one_line(shot_path), timing=timing, lens_q=lens_q)
     return problem, shot
 
 
@@ -651,6 +674,7 @@ def place(
     jobs: int | None = None,
     progress: bool = False,
     top: int = 3,
+    lens: str | None = None,
 ) -> PlaceReport:
     """Search the placement of the robot for a shot (see the module docstring).
 
@@ -658,6 +682,7 @@ def place(
         InputError: Unreadable shot, robot or set file, bad jobs.
         PlacementError: No placement passes the cheap tests (exit 3).
     """
+    from camtraj.convert import load_robot
     from camtraj.inputs import require_regular_files
     from camtraj.options import ConvertOptions
 
@@ -665,9 +690,9 @@ def place(
     jobs = default_jobs(jobs)
     # the options convert would take: the same checks of the clearance and of every input file
     options = ConvertOptions(robot=robot, set_file=set_file, camera=camera, frames=frames,
-                             clearance=clearance)
+                             clearance=clearance, lens=lens)
     require_regular_files(shot_path, options)
-    rob = Robot.default() if robot is None else Robot.from_toml(robot)
+    rob = load_robot(options)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
     problem, shot = load_problem(shot_path, options, rob, sf, clearance=clearance, rate=rate)
     runner = _Runner((problem,), jobs, progress)
@@ -729,6 +754,9 @@ def columns(r: Result) -> str:
 @click.option("--frames", metavar="A:B", help="Film frame range of every shot (inclusive).")
 @click.option("--clearance", type=click.FloatRange(0.0, 5.0), metavar="M",
               help="Distance [m] to keep from the obstacles (default: the set file's).")
+@click.option("--lens", type=click.Path(exists=True, dir_okay=False), metavar="LENS.toml",
+              help="Lens file: its zoom, focus and iris motors are timed with the joints, as "
+                   "convert --lens times them (default: the robot file's [lens], if any).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes (default: the number of CPUs).")
 @click.option("--top", type=click.IntRange(1, 20), default=3, show_default=True,
@@ -741,8 +769,9 @@ def columns(r: Result) -> str:
 @click.pass_context
 def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | None,
                   robot: str | None, set_file: str | None, camera: str | None,
-                  frames: str | None, clearance: float | None, jobs: int | None, top: int,
-                  as_json: bool, output: str | None, quiet: bool) -> None:
+                  frames: str | None, clearance: float | None, lens: str | None,
+                  jobs: int | None, top: int, as_json: bool, output: str | None,
+                  quiet: bool) -> None:
     """Find where to lay the track for SHOT: the robot base's x, y and yaw on the floor.
 
     Prints the best placements (x, y, yaw, maximum feasible speed, the axis that limits it,
@@ -789,16 +818,17 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                 outputs.add(output, "-o")
                 given = [m.path for m in members] if layout_name is not None else list(shots)
                 outputs.refuse_inputs([
-                    *files_read(given, ConvertOptions(robot=robot, set_file=set_file)),
+                    *files_read(given, ConvertOptions(robot=robot, set_file=set_file,
+                                                      lens=lens)),
                     *([] if scene is None else [(Path(scene), "the scene file")])])
             if layout_name is None:
                 report = place(shots[0], robot=robot, set_file=set_file, camera=camera,
                                frames=span, clearance=clearance, jobs=jobs,
-                               progress=progress, top=top)
+                               progress=progress, top=top, lens=lens)
             else:
                 _place_scene(ctx, outputs, members, layout_name, robot=robot,
                              set_file=set_file, clearance=clearance, jobs=jobs,
-                             progress=progress, as_json=as_json, output=output)
+                             progress=progress, as_json=as_json, output=output, lens=lens)
                 return
         except CamtrajError as exc:
             click.echo(f"ERROR: {exc}", err=True)
@@ -829,7 +859,8 @@ def _write(ctx: click.Context, outputs: Any, output: str, text: str, as_json: bo
 
 def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str, *,
                  robot: str | None, set_file: str | None, clearance: float | None,
-                 jobs: int | None, progress: bool, as_json: bool, output: str | None) -> None:
+                 jobs: int | None, progress: bool, as_json: bool, output: str | None,
+                 lens: str | None = None) -> None:
     """``camtraj place`` of a scene: one layout for every shot, or the smallest split."""
     import json
 
@@ -838,7 +869,7 @@ def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str
     from camtraj.set_file import to_toml
 
     report = place_scene(members, name=name, robot=robot, set_file=set_file,
-                         clearance=clearance, jobs=jobs, progress=progress)
+                         clearance=clearance, jobs=jobs, progress=progress, lens=lens)
     click.echo(json.dumps(report.to_json(), indent=2) if as_json else scene_table(report))
     if not report.ok or report.layout is None:
         click.echo(f"ERROR: no single layout serves every shot of the scene; the smallest "

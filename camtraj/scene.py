@@ -44,7 +44,6 @@ from camtraj.place import (
     search,
     with_clearance,
 )
-from camtraj.robot import Robot
 from camtraj.set_file import SetFile
 
 _SCENE_KEYS = {"name", "set_file", "shot"}
@@ -204,6 +203,7 @@ def place_scene(
     rate: float = 250.0,
     jobs: int | None = None,
     progress: bool = False,
+    lens: str | None = None,
 ) -> SceneReport:
     """One placement for every shot of a scene, or the smallest split (module docstring).
 
@@ -211,14 +211,17 @@ def place_scene(
         InputError: Unreadable shot, robot or set file; shots on stages of different units.
         PlacementError: A shot that no placement can do even on its own (exit 3).
     """
+    from camtraj.convert import load_robot
+
     start = time.perf_counter()
     jobs = default_jobs(jobs)
     options = [ConvertOptions(robot=robot, set_file=set_file, camera=s.camera, frames=s.frames,
-                              clearance=clearance, timing=s.timing) for s in shots]
+                              clearance=clearance, timing=s.timing, lens=lens)
+               for s in shots]
     for s, opt in zip(shots, options, strict=True):
         require_regular_files(s.path, opt)
     _no_repeats(shots)
-    rob = Robot.default() if robot is None else Robot.from_toml(robot)
+    rob = load_robot(options[0])
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
     problems: list[Problem] = []
     units: list[tuple[float, str]] = []

@@ -337,3 +337,34 @@ def test_limits_column_is_use_like_every_other_percentage(robot: Robot) -> None:
     # The number sits under its header.
     end = header.index("limits use") + len("limits use")
     assert [r[:end][-4:] for r in rows] == [" 40%", " 90%"]
+
+
+def test_place_times_the_lens_motors_as_convert_does(tmp_path: Path) -> None:
+    """With --lens, a zoom motor too slow for the dolly zoom limits the placement's speed:
+    place reports the zoom as binding and the speed convert's analysis (with the same lens)
+    finds at the placed base; without the lens the same placement is faster."""
+    from tests.test_lens_axes import _dolly_zoom, _lens_file
+
+    shot = _dolly_zoom(tmp_path)
+    slow = _lens_file(tmp_path, "slow.toml", "max_velocity = 60.0", "max_velocity = 3.0")
+    sf = tmp_path / "set.toml"
+    sf.write_text("[search]\nyaw_deg = 0.0\n")
+
+    def place(*extra: object) -> dict[str, Any]:
+        proc = subprocess.run([sys.executable, "-m", "camtraj", "place", shot, "--set-file", sf,
+                               "--frames", "1001:1040", "--top", "1", "--json", "-q", "-j", "1",
+                               *map(str, extra)], capture_output=True, text=True, check=False)
+        assert proc.returncode in (0, 3), proc.stderr
+        best: dict[str, Any] = json.loads(proc.stdout)["placements"][0]
+        return best
+
+    best = place("--lens", slow)
+    assert best["binding"].startswith("zoom "), best
+    a = analyse(shot, ConvertOptions(placement=(best["x"], best["y"], 0.0, best["yaw_deg"]),
+                                     frames=(1001, 1040), lens=str(slow), timing="scale"))
+    assert a.take is not None
+    assert best["max_speed"] == pytest.approx(a.take.report.max_speed, rel=1e-2)
+    assert best["max_speed"] < 1.0 and not best["ok"]
+    free = analyse(shot, ConvertOptions(placement=(best["x"], best["y"], 0.0, best["yaw_deg"]),
+                                        frames=(1001, 1040), timing="scale"))
+    assert free.take is not None and free.take.report.max_speed > 1.5 * best["max_speed"]

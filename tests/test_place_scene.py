@@ -279,3 +279,104 @@ def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"shot 3 .* repeats shot 1"):
         _no_repeats([SceneShot(str(shot)), SceneShot(str(shot), "/cam"),
                      SceneShot(str(tmp_path / "b.usda"))])
+
+
+def test_the_layout_does_not_depend_on_the_number_of_jobs(scene: dict[str, Any]) -> None:
+    """One worker or two: the same placement and the same per-shot speeds (the race that
+    drops placements early keeps the exact best ones whatever order the solves finish in)."""
+    d = scene["dir"]
+    proc = run("place", *scene["three"], "--set-file", d / "set.toml", "--json", "-j", "1")
+    assert proc.returncode == 0, proc.stderr
+    one, two = json.loads(proc.stdout)["placement"], scene["report"]["placement"]
+    assert (one["x"], one["y"], one["yaw_deg"]) == pytest.approx(
+        (two["x"], two["y"], two["yaw_deg"]), abs=1e-9)
+    assert [s["max_speed"] for s in one["shots"]] == pytest.approx(
+        [s["max_speed"] for s in two["shots"]], rel=1e-9)
+    assert one["limiting_shot"] == two["limiting_shot"]
+
+
+def test_the_race_keeps_the_best_layouts_of_a_brute_force_whatever_the_jobs() -> None:
+    """The race that stops solving a placement once the shots solved rule it out, on made-up
+    solve results full of ties: with any number of jobs it keeps exactly the ``need`` best
+    placements of solving every shot at every placement (ties broken by the position)."""
+    from camtraj.place import Layout, Result, _race, _ranked
+
+    rng = np.random.default_rng(7)
+    places = [(float(x), float(y), float(yaw)) for x in range(4) for y in range(3)
+              for yaw in (0.0, 90.0)]
+    n_shots = 3
+    speeds = rng.choice([1.0, 2.0], p=[0.3, 0.7], size=(len(places), n_shots))
+    reach = np.where(rng.random((len(places), n_shots)) < 0.15, 0.5, 1.0)
+    truth = {p: (speeds[k], reach[k]) for k, p in enumerate(places)}
+
+    def result(shot: int, x: float, y: float, yaw: float) -> Result:
+        s, r = truth[(x, y, yaw)]
+        return Result(x, y, yaw, False, float(r[shot]), True, True, float(s[shot]), "")
+
+    class Runner:
+        def __init__(self, jobs: int) -> None:
+            self.jobs, self.count = jobs, 0
+
+        def run(self, tasks: list[tuple[int, float, float, float, int]]) -> list[Result]:
+            self.count += len(tasks)
+            return [result(i, x, y, yaw) for i, x, y, yaw, _ in tasks[::-1]][::-1]
+
+    def brute(need: int) -> list[tuple[float, ...]]:
+        """The need best keys (ties and all) of every shot solved at every placement."""
+        keys = [tuple(min(result(i, *p).key()[c] for i in range(n_shots)) for c in range(5))
+                for p in places]
+        return sorted(keys, reverse=True)[:need]
+
+    assert brute(3)[0] == brute(3)[2]  # the best placements tie
+    for need in (1, 2, 3):
+        kept = set()
+        for jobs in (1, 2, 3, 7):
+            runner = Runner(jobs)
+            layouts = [Layout(*p, tuple(np.roll(range(n_shots), k % n_shots).tolist()))
+                       for k, p in enumerate(places)]
+            _race(runner, layouts, dict.fromkeys(range(n_shots), 4), need)  # type: ignore[arg-type]
+            best = _ranked(layouts)[:need]
+            assert [lay.key() for lay in best] == brute(need), (need, jobs)
+            kept.add(tuple((lay.x, lay.y, lay.yaw_deg) for lay in best))
+            assert runner.count < len(places) * n_shots  # the race did drop placements
+        assert len(kept) == 1, (need, kept)  # the same placements whatever the jobs
+
+
+def test_the_scene_search_takes_the_same_steps_whatever_the_jobs(
+        scene: dict[str, Any], robot: Robot) -> None:
+    """The whole coarse-to-fine search of a scene over the real shots' cheap tests, with
+    made-up solve results (a bumpy speed field per shot, bumpier solved on every frame; no
+    solver): one, two, three or five jobs pick the same layout."""
+    from camtraj.place import Result, load_problem, search
+    from camtraj.set_file import SetFile
+
+    sf = SetFile()
+    problems = tuple(load_problem(s, ConvertOptions(), robot, sf, clearance=None,
+                                  rate=250.0)[0] for s in scene["three"])
+
+    def result(i: int, x: float, y: float, yaw: float, stride: int) -> Result:
+        bump = math.sin(3.0 * x + (i + 1) * y) + math.cos(0.05 * (i + 2) * yaw - y)
+        if stride == 1:  # every frame solved: not quite what the subsample said
+            bump += 3.0 * math.sin(17.0 * x + 13.0 * y + yaw)
+        return Result(x, y, yaw, stride == 1, 1.0, True, True, 1.0 + 0.25 * bump, "",
+                      {"limits_use": 0.5, "wrist_deg": 30.0, "stretch_deg": 40.0})
+
+    class Runner:
+        def __init__(self, jobs: int) -> None:
+            self.problems, self.jobs, self.count = problems, jobs, 0
+            self.solved: set[tuple[float, float, float]] = set()
+
+        def run(self, tasks: list[tuple[int, float, float, float, int]]) -> list[Result]:
+            self.count += len(tasks)
+            self.solved |= {(x, y, yaw) for _, x, y, yaw, _ in tasks}
+            return [result(*t) for t in tasks]
+
+    found = []
+    for jobs in (1, 2, 3, 5):
+        runner = Runner(jobs)
+        best = search(runner, (0, 1, 2), sf, meters_per_unit=1.0, up_axis="Z",  # type: ignore[arg-type]
+                      top=1)[0][0]
+        found.append((best.x, best.y, best.yaw_deg))
+        worst = min(result(i, *found[-1], 1).max_speed for i in range(3))
+        assert best.results[best.limiting].max_speed == pytest.approx(worst)
+    assert len(set(found)) == 1, found
