@@ -36,8 +36,11 @@ def run() -> None:
             held, _starting = _starting, None
             held.__exit__(None, None, None)  # raises a signal held since the import
         from camtraj.cli import main
-    except KeyboardInterrupt as exc:
-        _stopped_while_starting(exc)
+    except BaseException as exc:  # a stop may come wrapped in another error
+        stop = interrupts.interruption(exc)
+        if stop is None:
+            raise
+        _stopped_while_starting(stop)
     main()
 
 

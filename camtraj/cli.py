@@ -118,8 +118,7 @@ class _Main(click.Group):
         except SystemExit as exc:
             code = exc.code
         except click.exceptions.Abort as exc:
-            cause = exc.__cause__ or exc.__context__
-            stopped(cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt())
+            stopped(interrupts.interruption(exc) or KeyboardInterrupt())
         except KeyboardInterrupt as exc:
             stopped(exc)
         except click.exceptions.NoArgsIsHelpError as exc:
@@ -132,6 +131,11 @@ class _Main(click.Group):
                 hint = f" (see '{ctx.command_path} --help')"
             click.echo(f"ERROR: {' '.join(exc.format_message().split())}{hint}", err=True)
             code = exc.exit_code
+        except Exception as exc:  # a stop can come wrapped (an import's __set_name__)
+            stop = interrupts.interruption(exc)
+            if stop is None:
+                raise
+            stopped(stop)
         try:
             sys.stdout.flush()
         except OSError as err:

@@ -37,6 +37,7 @@ __all__ = [
     "ignore",
     "ignore_from_now",
     "install",
+    "interruption",
     "requested",
 ]
 
@@ -109,6 +110,23 @@ def _set_handlers(handler: signal.Handlers | Callable[[int, FrameType | None], N
 def requested() -> int | None:
     """The signal number of a stop requested so far, else None."""
     return _state.pending
+
+
+def interruption(exc: BaseException) -> KeyboardInterrupt | None:
+    """The stop behind an exception: ``exc`` itself, or the one it was raised from or while
+    handling (Python wraps an exception raised in some places, e.g. a class attribute's
+    ``__set_name__`` during an import, in a RuntimeError); None if there is none."""
+    seen: set[int] = set()
+    todo: list[BaseException | None] = [exc]
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, KeyboardInterrupt):
+            return e
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return None
 
 
 def check() -> None:

@@ -342,3 +342,20 @@ def test_a_signal_to_the_batch_process_alone_stops_its_shots(
         assert time.monotonic() - start < TIMEOUT, "a worker is still running"
         time.sleep(0.05)
     assert sorted(p.name for p in folder.iterdir()) == ["a.mcap"]
+
+
+def test_a_stop_wrapped_by_python_is_still_a_stop() -> None:
+    """A signal landing in a class attribute's ``__set_name__`` (an import creating a class,
+    as ``platform.uname_result``) reaches camtraj as a RuntimeError: the stop is found behind
+    it, and any other error is not taken for one."""
+    from camtraj.interrupts import Interrupted, interruption
+
+    class Stops:
+        def __set_name__(self, owner: type, name: str) -> None:
+            raise Interrupted(15)
+
+    with pytest.raises(BaseException) as caught:  # noqa: PT011 - wrapped or not: Python's
+        type("Created", (), {"attr": Stops()})
+    stop = interruption(caught.value)
+    assert isinstance(stop, Interrupted) and stop.signum == 15
+    assert interruption(ValueError("no stop here")) is None
