@@ -62,8 +62,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy camtraj
 
+# The suite on every core (pytest-xdist), a test file per worker: module fixtures such as
+# the shot set's solves run once.
 unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
-	$(BIN)/pytest $(ARGS)
+	$(BIN)/pytest -n auto --dist loadfile $(ARGS)
 
 # Headless Chromium renders the HTML report in the tests (they skip, saying so, without it).
 # Idempotent: installs the Debian package only when no chromium is on the PATH. `make test`
