@@ -14,6 +14,7 @@ import codecs
 import contextlib
 import os
 import stat
+import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,26 @@ def require_regular_file(path: str | os.PathLike[str], what: str, error: type[In
     if not stat.S_ISREG(mode):
         kind = _KIND.get(stat.S_IFMT(mode), "not a regular file")
         msg = f"{one_line(path)}: the {what} is {kind}, not a regular file"
+        raise error(msg)
+
+
+def parse_toml(text: str, where: str, error: type[InputError]) -> dict[str, Any]:
+    """The table of a TOML text; a syntax error is one line naming ``where`` (the file)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = f"{where}: not valid TOML ({exc})"
+        raise error(msg) from None
+
+
+def reject_unknown_keys(table: dict[str, Any], allowed: set[str], where: str, what: str,
+                        error: type[InputError]) -> None:
+    """One line naming the file (``where``), the table (``what``), the keys it does not know
+    and those it does, if ``table`` has a key outside ``allowed``."""
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        msg = (f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
+               f"allowed: {', '.join(sorted(allowed))}")
         raise error(msg)
 
 

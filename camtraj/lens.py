@@ -28,7 +28,6 @@ calibration: a shot that leaves it is an error at that frame.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import InputError, LensFileError, LensRangeError
-from camtraj.inputs import one_line, read_text
+from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
 from camtraj.robot import ControllerUnits
 
 if TYPE_CHECKING:
@@ -194,11 +193,7 @@ class Lens:
         """
         where = f"lens file {one_line(path)}"
         text = read_text(path, "lens file", LensFileError)
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            msg = f"{where}: not valid TOML ({exc})"
-            raise LensFileError(msg) from None
+        data = parse_toml(text, where, LensFileError)
         return lens_from_table(data, where=where, source=str(path), prefix="",
                                error=LensFileError)
 
@@ -377,13 +372,9 @@ class _Reader:
         return value
 
     def no_unknown(self, table: dict[str, Any], allowed: set[str], key: str) -> None:
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            where = f"[{self.prefix}{key}]" if key else (
-                f"[{self.prefix[:-1]}]" if self.prefix else "the top level")
-            msg = (f"{self.where}: unknown key(s) {', '.join(unknown)} in {where}; allowed: "
-                   f"{', '.join(sorted(allowed))}")
-            raise self.error(msg)
+        what = f"[{self.prefix}{key}]" if key else (
+            f"[{self.prefix[:-1]}]" if self.prefix else "the top level")
+        reject_unknown_keys(table, allowed, self.where, what, self.error)
 
     def number(self, value: Any, key: str, *, finite: bool = True) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):

@@ -8,7 +8,6 @@ z up, joints ordered track, rotate, lift, extend, elbow, pan, tilt, roll. Transf
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -18,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import InputError, RobotFileError
-from camtraj.inputs import read_text
+from camtraj.inputs import parse_toml, read_text, reject_unknown_keys
 
 if TYPE_CHECKING:
     from camtraj.lens import Lens
@@ -176,12 +175,8 @@ class Robot:
 
     @classmethod
     def from_toml_text(cls, text: str, *, source: str = "<text>") -> Robot:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            msg = f"robot file {source}: not valid TOML ({exc})"
-            raise RobotFileError(msg) from exc
-        return _robot_from_dict(data, source)
+        return _robot_from_dict(parse_toml(text, f"robot file {source}", RobotFileError),
+                                source)
 
     # -- kinematics ---------------------------------------------------------------------
     def link_frames(self, q: ArrayLike) -> Array:
@@ -521,13 +516,7 @@ def _table(data: dict[str, Any], key: str, where: str, *, required: bool) -> dic
 
 
 def _no_unknown(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        msg = (
-            f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
-            f"allowed: {', '.join(sorted(allowed))}"
-        )
-        raise RobotFileError(msg)
+    reject_unknown_keys(table, allowed, where, what, RobotFileError)
 
 
 def _array(value: Any, shape: tuple[int, ...], key: str, what: str, where: str) -> Array:

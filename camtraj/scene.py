@@ -24,14 +24,19 @@ from __future__ import annotations
 import math
 import os
 import time
-import tomllib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from camtraj.errors import InputError, PlacementError
-from camtraj.inputs import one_line, read_text, require_regular_files
+from camtraj.inputs import (
+    one_line,
+    parse_toml,
+    read_text,
+    reject_unknown_keys,
+    require_regular_files,
+)
 from camtraj.options import TIMING_MODES, ConvertOptions
 from camtraj.place import (
     Layout,
@@ -85,12 +90,8 @@ class Scene:
         """
         where = f"scene file {one_line(path)}"
         text = read_text(path, "scene file", InputError)
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            msg = f"{where}: not valid TOML ({exc})"
-            raise InputError(msg) from exc
-        _allowed(data, _SCENE_KEYS, where, "the top level")
+        data = parse_toml(text, where, InputError)
+        reject_unknown_keys(data, _SCENE_KEYS, where, "the top level", InputError)
         base = Path(os.fsdecode(path)).parent
         name = data.get("name")
         if name is not None and not (isinstance(name, str) and name.isprintable()
@@ -111,16 +112,8 @@ class Scene:
                    None if set_file is None else str(base / set_file))
 
 
-def _allowed(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        msg = (f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
-               f"allowed: {', '.join(sorted(allowed))}")
-        raise InputError(msg)
-
-
 def _shot(table: dict[str, Any], base: Path, where: str) -> SceneShot:
-    _allowed(table, _SHOT_KEYS, where, "the shot")
+    reject_unknown_keys(table, _SHOT_KEYS, where, "the shot", InputError)
     path = table.get("path")
     if not isinstance(path, str) or not path:
         msg = f'{where}: path = "SHOT.usda" is required'

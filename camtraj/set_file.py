@@ -31,7 +31,6 @@ line naming the file, the key and the allowed range.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.errors import InputError
-from camtraj.inputs import one_line, read_text
+from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
 
 Array = NDArray[np.float64]
 
@@ -87,19 +86,15 @@ class SetFile:
     @classmethod
     def parse(cls, text: str, source: str = "<text>") -> SetFile:
         where = f"set file {source}"
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            msg = f"{where}: not valid TOML ({exc})"
-            raise InputError(msg) from exc
-        _allowed(data, set(_KEYS), where, "the top level")
+        data = parse_toml(text, where, InputError)
+        reject_unknown_keys(data, set(_KEYS), where, "the top level", InputError)
         tables = {}
         for name, keys in _KEYS.items():
             table = data.get(name, {})
             if not isinstance(table, dict):
                 msg = f"{where}: [{name}] must be a table"
                 raise InputError(msg)
-            _allowed(table, keys, where, f"[{name}]")
+            reject_unknown_keys(table, keys, where, f"[{name}]", InputError)
             tables[name] = table
         floor, search, coll = tables["floor"], tables["search"], tables["collision"]
         region = None
@@ -219,14 +214,6 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     return repr(value)
-
-
-def _allowed(table: dict[str, Any], allowed: set[str], where: str, what: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        msg = (f"{where}: unknown key(s) {', '.join(unknown)} in {what}; "
-               f"allowed: {', '.join(sorted(allowed))}")
-        raise InputError(msg)
 
 
 def _number(value: Any, where: str, key: str, lo: float, hi: float) -> float:
