@@ -260,14 +260,16 @@ def time_shot(
         # than the uniform take at the maximum feasible speed, so its run-up and run-out
         # have room too.
         speed_factor, ticks, shot, shot_x, up, out = scaled()
-        fastest = scaled(floor=1.0 / MAX_SCALE)
-        if fastest[0] < speed_factor and not path.still.all(axis=1).any():
-            speed_factor, ticks, shot, shot_x, up, out = fastest
+        fastest_factor = speed_factor  # a shot that must slow down: the scale take itself
+        if need < 1.0:
+            fastest = scaled(floor=1.0 / MAX_SCALE)
+            fastest_factor = fastest[0]
+            if fastest_factor < speed_factor and not path.still.all(axis=1).any():
+                speed_factor, ticks, shot, shot_x, up, out = fastest
+            del fastest  # its samples, unless they are the take's
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
-        fastest_factor = fastest[0]
-        del fastest  # its samples, unless they are the take's
         retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
         if retimed is not None:
             shot_t, shot_x, shot, frame_idx = retimed
