@@ -2,15 +2,16 @@
 
 The variables are the track and extend values of every frame, x (n, 2) [m]; every other axis is
 the closed-form solution on the frame's branch, so each frame reaches its pose exactly whatever
-x is. The full :class:`ShotCost` (acceleration and jerk included) is lowered by damped
-Gauss-Newton steps (Levenberg-Marquardt): per-frame 10 x 2 Jacobians of the measures by central
-differences of the closed form (all frames in one call), finite differences of up to third order
-between frames, so the normal matrix is banded (seven super-diagonals) and one banded Cholesky
-solve gives the step. The L1 motion term enters through its majorising quadratic (iteratively
-reweighted), the margin and overspeed hinges through their active sets. Each step is projected
-into the corridor (the frame's track interval, then extend's reach interval at that track); a
-frame the closed form cannot solve there keeps its previous values; a step is kept only if the
-exact objective drops, so the result is never worse than its start.
+x is. :meth:`ShotCost.refine_total` (a power mean of the take's uses of the limits along the
+timing stage's spline, :mod:`camtraj.ik.spline_ops`, with margins, run-up/run-out room and the
+motion tie-break) is lowered by damped Gauss-Newton steps (Levenberg-Marquardt): per-frame
+10 x 2 Jacobians of the measures by one-sided differences of the closed form (all frames in one
+call), the spline's banded operators between frames, so the normal matrix is banded and one
+banded Cholesky solve gives the step (the power mean's concave root enters as a rank-one
+correction). Each step is projected into the corridor (the frame's track interval, then
+extend's reach interval at that track); a frame the closed form cannot solve there keeps its
+previous values; a step is kept only if the exact objective drops, so the result is never
+worse than its start. A continuation raises the power in stages (:class:`Refinement`).
 """
 
 from __future__ import annotations
@@ -40,13 +41,11 @@ REFINE_STAGES = len(_POWERS)
 
 @dataclass
 class Refined:
-    """The refined curves: x (n, 2) [m], measures y (n, 10), objective J, rounds taken, and
-    the take's maximum feasible speed (as ``take_speed`` measures it)."""
+    """The refined curves: x (n, 2) [m], measures y (n, 10), and the take's maximum feasible
+    speed (as ``take_speed`` measures it)."""
 
     x: Array
     y: Array
-    cost: float
-    rounds: int
     speed: float = math.inf
 
 
@@ -96,7 +95,6 @@ class Refinement:
         self.rounds, self.tolerance = rounds, tolerance
         self.x, self.y = x0.copy(), y0.copy()
         self.stages_done = 0
-        self.taken = 0
         self.mu = 1e-3  # the damping, carried from stage to stage
         self.corridor = _Corridor(robot, targets, lo1, hi1) if x0.shape[0] >= 2 else None
         # the start and every stage's answer by the timing stage (which also sees what the
@@ -113,10 +111,9 @@ class Refinement:
         if self.corridor is None:
             return
         stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
-        self.x, self.y, steps, self.mu = _descend(self.robot, stage, self.corridor,
+        self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor,
                                                   self.targets, self.branch, self.x, self.y,
                                                   self.rounds, self.tolerance, self.mu)
-        self.taken += steps
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
             self.best = (v, self.x, self.y)
@@ -124,8 +121,7 @@ class Refinement:
     def result(self) -> Refined:
         """The fastest answer so far."""
         v, x, y = self.best
-        final = replace(self.cost, power=_POWERS[-1], scale=max(self.cost.peak(y[:, :8]), 1e-6))
-        return Refined(x.copy(), y.copy(), final.refine_total(y), self.taken, v)
+        return Refined(x.copy(), y.copy(), v)
 
 
 def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
@@ -142,13 +138,12 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
              branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
-             mu: float) -> tuple[Array, Array, int, float]:
+             mu: float) -> tuple[Array, Array, float]:
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
-    from damping ``mu``: the curves, the steps taken and the damping reached."""
+    from damping ``mu``: the curves and the damping reached."""
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
     j = cost.refine_total(y)
-    taken = 0
     slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
     for _ in range(rounds):
         grad_y = _jacobian(robot, targets3, b3, x, y)
@@ -173,13 +168,12 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
                 mu = max(mu / 4.0, 1e-9)
                 break
             mu *= 8.0
-        taken += 1
         if not improved:
             break
         slow = slow + 1 if rel < tolerance else 0
         if slow >= 3:
             break
-    return x, y, taken, mu
+    return x, y, mu
 
 
 def _try_step(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
