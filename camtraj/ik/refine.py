@@ -13,7 +13,7 @@ extend's reach interval at that track); a frame the closed form cannot solve the
 previous values; a step is kept only if the exact objective drops, so the result is never
 worse than its start. A continuation raises the power in stages (:class:`Refinement`); from
 the second stage on, a use far below the peak is modelled with the curvature it would have
-near it (:data:`_FLOORS`), so a step that would lift it there is not taken as free.
+near it (:data:`_STAGES`), so a step that would lift it there is not taken as free.
 """
 
 from __future__ import annotations
@@ -37,16 +37,20 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 _H = 1e-6  # [m] central-difference step of the Jacobian
-_POWERS = (6.0, 12.0, 24.0, 48.0)  # the peak norm's continuation
-#: Per stage: the share of the stage's scale below which a use's model curvature is floored
-#: (``a`` = |z| / scale^k, k the use's order, in :func:`_normal_equations`). The Gauss-Newton
-#: model of a high power of a small use, a^(p/k), is nearly flat, so a step that lifts the use
-#: towards the peak looks free and fails: from the second stage on (p / k reaches 4 and more)
-#: a use below the floor gets the curvature it would have at the floor, which majorises the
-#: term over the steps that matter (measured on the shot set: the 100 deg arc 1.92x -> 2.33x,
-#: the 60 fps follow 2.22x -> 2.48x; stages that stalled at their first step now descend).
-_FLOORS = (0.0, 0.7, 0.7, 0.7)
-REFINE_STAGES = len(_POWERS)
+#: The peak norm's continuation, one row per stage: the power of the power mean; the share of
+#: the stage's scale below which a use's model curvature is floored (``a`` = |z| / scale^k,
+#: k the use's order, in :func:`_normal_equations`); and the stage's tolerance as a multiple
+#: of ``refine_tolerance``.
+#:
+#: The Gauss-Newton model of a high power of a small use, a^(p/k), is nearly flat, so a step
+#: that lifts the use towards the peak looks free and fails: from the second stage on (p / k
+#: reaches 4 and more) a use below the floor gets the curvature it would have at the floor,
+#: which majorises the term over the steps that matter. With the floor those stages descend
+#: instead of stalling at their first step; each polishes the last one's answer, so it stops
+#: at ten times the tolerance (measured on the shot set: the 100 deg arc 1.92x -> 2.35x, the
+#: 60 fps follow 2.22x -> 2.43x, for 1.09x the CPU).
+_STAGES = ((6.0, 0.0, 1.0), (12.0, 0.7, 10.0), (24.0, 0.7, 10.0), (48.0, 0.7, 10.0))
+REFINE_STAGES = len(_STAGES)
 
 
 @dataclass
@@ -78,9 +82,10 @@ class Refinement:
     """The refinement of one start, run stage by stage (:func:`refine` runs every stage).
 
     A continuation over the power of :meth:`ShotCost.refine_total`'s peak norm (6, 12, 24,
-    48): each stage starts from the last one's answer with the scale set to its peak use,
-    and runs damped Gauss-Newton steps until three steps in a row lower the stage's objective
-    by less than ``tolerance`` (relative), no step lowers it, or after ``rounds`` steps. The
+    48, :data:`_STAGES`): each stage starts from the last one's answer with the scale set to
+    its peak use, and runs damped Gauss-Newton steps until three steps in a row lower the
+    stage's objective by less than ``tolerance`` (relative; ten times that after the first
+    stage), no step lowers it, or after ``rounds`` steps. The
     start and every stage's answer are measured with ``take_speed`` and the fastest is kept.
 
     Args:
@@ -116,14 +121,14 @@ class Refinement:
         """Run the next stage of the continuation (nothing once all have run)."""
         if self.stages_done >= REFINE_STAGES:
             return
-        power, floor = _POWERS[self.stages_done], _FLOORS[self.stages_done]
+        power, floor, tolerance = _STAGES[self.stages_done]
         self.stages_done += 1
         if self.corridor is None:
             return
         stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
-                                           self.tolerance, self.mu, floor)
+                                           tolerance * self.tolerance, self.mu, floor)
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
             self.best = (v, self.x, self.y)
@@ -141,7 +146,7 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
     """Every stage of a :class:`Refinement` (the same arguments): the fastest answer."""
     run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1, rounds, tolerance,
                      take_speed)
-    for _ in _POWERS:
+    for _ in _STAGES:
         run.stage()
     return run.result()
 
@@ -150,7 +155,7 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
              branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
              mu: float, floor: float = 0.0) -> tuple[Array, Array, float]:
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
-    from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_FLOORS`): the curves
+    from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_STAGES`): the curves
     and the damping reached."""
     targets3 = np.concatenate([targets] * 3)
     b3 = np.tile(branch, 3)
@@ -241,7 +246,7 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array,
     then the chain rule through the per-frame Jacobians (n, 10, 2) gives the blocks. The peak
     norm T = s (sum f)^(1/p), f = (|z| / s^k)^(p/k) for order k, enters through its
     Gauss-Newton model (the concave outer power dropped: the model overestimates curvature),
-    each use's curvature taken at ``max(a, floor)`` (:data:`_FLOORS`);
+    each use's curvature taken at ``max(a, floor)`` (:data:`_STAGES`);
     the L1 motion tie-break through its majorising quadratic; margin hinges through their
     active sets.
     """
