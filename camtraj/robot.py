@@ -109,7 +109,8 @@ class IKSettings:
     track_samples, extend_samples: the candidate grid (``camtraj.ik.shot``).
     refine_rounds: most Gauss-Newton steps of each stage of the refinement.
     refine_tolerance: a stage has converged after three steps in a row that lower its
-        objective by less than this fraction.
+        objective by less than this fraction (the first stage; the later ones, which
+        polish its answer, at ten times it).
     """
 
     objective: str = "shot"
