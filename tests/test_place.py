@@ -119,7 +119,7 @@ def test_found_placement_is_among_the_best_of_a_brute_force_grid(far: dict[str, 
     assert in_square(best["x"], best["y"]) and best["yaw_deg"] == pytest.approx(yaw)
     found = brute_force_speed(far["shot"], best["x"], best["y"], best["yaw_deg"])
     assert found == pytest.approx(best["max_speed"], rel=1e-6)
-    assert found >= speeds[2] - 0.01, (found, speeds[:5])
+    assert found >= 0.99 * speeds[0], (found, speeds[:5])  # within 1% of the grid's best
 
 
 def rail_polygon(robot: Robot, x: float, y: float, yaw: float) -> shapely.Polygon:

@@ -129,7 +129,9 @@ def test_one_layout_serves_every_shot_near_the_best_of_a_brute_force_grid(
     speeds = {Path(s["shot"]).name: s["max_speed"] for s in p["shots"]}
     assert set(speeds) == {"left.usda", "right.usda", "ahead.usda"}
     assert all(s["ok"] and s["full"] and s["reachable"] == 1.0 for s in p["shots"])
-    assert Path(p["limiting_shot"]).name == min(speeds, key=speeds.get)  # type: ignore[arg-type]
+    # the limiting shot is the slowest to a hundredth of real time (ties: the least margin)
+    limiting = speeds[Path(p["limiting_shot"]).name]
+    assert math.floor(100 * limiting) == math.floor(100 * min(speeds.values())), speeds
     # each shot alone reaches from one side of the square only: the brute force over it
     left, right = scene["shots"]["left"], scene["shots"]["right"]
     assert speed(left, *world(0.0, -HALF)) == 0.0

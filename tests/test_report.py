@@ -505,12 +505,14 @@ def test_no_svg_text_overlaps_another_or_is_cut_off(runs: Runs, name: str) -> No
 
 def test_each_violation_span_is_labelled_with_its_own_peak(runs: Runs) -> None:
     """A violation over several runs of frames: each label gives the peak of its own run (the
-    largest of them the whole violation's peak), never more."""
+    largest of them the whole violation's peak), never more. (Since the refinement's later
+    stages stopped stalling, the whip sample's violations are each one run, so this checks the
+    one-run labels; the several-run case is not exercised by a shipped sample.)"""
     page = runs.html("whip")
     whole = {(v["axis"], v["quantity"]): v["ratio"]
              for v in json.loads(runs.procs["whip"].stdout)["violations"]}
     label = re.compile(rf"(\w+) ([\d.]+){rp.plots.TIMES} limit, frames? (\d+)(?:-(\d+))?")
-    several = 0
+    labelled = 0
     for root in svgs(page):
         axes = [el.get("id", "") for el in root.iter() if el.get("id", "").endswith("-axes")]
         if not axes:
@@ -524,9 +526,8 @@ def test_each_violation_span_is_labelled_with_its_own_peak(runs: Runs) -> None:
             peak = whole[(axis, quantity)]
             assert max(found) == pytest.approx(peak, rel=5e-3), (axis, quantity, found)
             assert all(r <= peak * 1.005 for r in found)
-            if len(found) > 1 and min(found) < 0.8 * peak:
-                several += 1
-    assert several >= 1  # the whip pan has a violation whose runs peak differently
+            labelled += 1
+    assert labelled >= 3  # the whip's pan, elbow and track violations at least
 
 
 def test_feasible_report_gives_the_terminal_margins(runs: Runs) -> None:
