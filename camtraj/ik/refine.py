@@ -48,7 +48,7 @@ _H = 1e-6  # [m] central-difference step of the Jacobian
 #: which majorises the term over the steps that matter. With the floor those stages descend
 #: instead of stalling at their first step; each polishes the last one's answer, so it stops
 #: at ten times the tolerance (measured on the shot set: the 100 deg arc 1.92x -> 2.35x, the
-#: 60 fps follow 2.22x -> 2.43x, for 1.09x the CPU).
+#: 60 fps follow 2.22x -> 2.43x, for about the same CPU: 0.84-1.09x over repeated runs).
 _STAGES = ((6.0, 0.0, 1.0), (12.0, 0.7, 10.0), (24.0, 0.7, 10.0), (48.0, 0.7, 10.0))
 REFINE_STAGES = len(_STAGES)
 
