@@ -121,14 +121,14 @@ class Refinement:
         """Run the next stage of the continuation (nothing once all have run)."""
         if self.stages_done >= REFINE_STAGES:
             return
-        power, floor, tolerance = _STAGES[self.stages_done]
+        power, floor, loosen = _STAGES[self.stages_done]
         self.stages_done += 1
         if self.corridor is None:
             return
         stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
-                                           tolerance * self.tolerance, self.mu, floor)
+                                           loosen * self.tolerance, self.mu, floor)
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
             self.best = (v, self.x, self.y)
@@ -153,7 +153,7 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
              branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
-             mu: float, floor: float = 0.0) -> tuple[Array, Array, float]:
+             mu: float, floor: float) -> tuple[Array, Array, float]:
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
     from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_STAGES`): the curves
     and the damping reached."""
