@@ -101,10 +101,17 @@ def ignore() -> None:
 
 def _set_handlers(handler: signal.Handlers | Callable[[int, FrameType | None], None]) -> None:
     for signum in SIGNALS:
-        try:
-            signal.signal(signum, handler)
-        except ValueError:  # not the main thread: signals are the main thread's business
-            return
+        for _attempt in range(3):
+            try:
+                signal.signal(signum, handler)
+            except ValueError:  # not the main thread: signals are the main thread's business
+                return
+            except OSError:
+                # A signal that arrived while its handler was being switched to SIG_IGN:
+                # CPython reports it as "Signal N ignored due to race condition" instead of
+                # changing the handler. It was ignored, as asked: set the handler again.
+                continue
+            break
 
 
 def requested() -> int | None:
