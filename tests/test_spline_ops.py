@@ -72,3 +72,45 @@ def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) ->
             ym = y - np.einsum("kmp,kp->km", G, h * d)
             numeric = (cost.refine_total(yp) - cost.refine_total(ym)) / (2 * h)
             assert numeric == pytest.approx(float((g * d).sum()), rel=1e-4, abs=1e-9 * j0)
+
+
+@pytest.mark.parametrize("n", [30, 150])
+def test_gathered_gradient_and_curvature_equal_the_dense_sums(n: int) -> None:
+    """The banded gather of the refinement's normal equations against the plain sums over
+    every operator row: frame f's gradient sum_r C[r, f] dz[r], the pair (f, f + d)'s
+    curvature sum_r C[r, f] C[r, f + d] w[r] (n = 150 has shift-invariant rows, 30 not)."""
+    from camtraj.ik.refine import _gather
+
+    ops = spline_ops(n)
+    rows, width, k = ops.coef.shape
+    rng = np.random.default_rng(n)
+    dz, w = rng.normal(size=(rows, 8, k)), rng.uniform(0.1, 1.0, size=(rows, 8, k))
+    pad = width
+    gq, M = np.zeros((n + 2 * pad, 8)), np.zeros((width, n + 2 * pad, 8))
+    _gather(ops, dz, w, gq, M, pad)
+    dense = np.zeros((k, rows, n))  # C[i, r, f]: operator i's row r's weight of frame f
+    for r in range(rows):
+        for o in range(width):
+            f = r + ops.offset + o
+            if 0 <= f < n:
+                dense[:, r, f] = ops.coef[r, o]
+    want_g = np.einsum("irf,rai->fa", dense, dz)
+    assert np.allclose(gq[pad:pad + n], want_g, rtol=1e-12, atol=1e-12 * np.abs(want_g).max())
+    for d in range(width):
+        want = np.einsum("irf,irf,rai->fa", dense[:, :, :n - d], dense[:, :, d:], w)
+        got = M[d, pad:pad + n - d]
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max()), d
+    assert not gq[:pad].any() and not gq[pad + n:].any()
+
+
+def test_whole_powers_equal_pow() -> None:
+    """The continuation's whole exponents by repeated squaring, and any other exponent, agree
+    with ``pow`` to a few units in the last place."""
+    from camtraj.ik.shot_cost import powers
+
+    a = np.random.default_rng(1).uniform(0.0, 2.0, size=(50, 8, 6))
+    a[0, 0] = 0.0
+    for ex in ([6.0, 6.0, 3.0, 3.0, 2.0, 2.0], [48.0, 48.0, 24.0, 24.0, 16.0, 16.0],
+               [0.0, 1.0, 2.0, 5.0, 8.0 / 3.0, 2.5]):
+        e = np.array(ex)
+        assert np.allclose(powers(a, e), a ** e, rtol=1e-13, atol=0.0)

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
-from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, margin_peak
+from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, margin_peak, powers
 from camtraj.ik.spline_ops import BandOps
 from camtraj.robot import Robot
 
@@ -266,8 +266,8 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array,
     c = s ** order
     lim = np.stack([(cost.vel, cost.acc, cost.jerk)[k - 1] for k in ops.orders], axis=-1)
     a = np.abs(use.z) / c
-    dz = kappa * ex * a ** (ex - 1.0) * np.sign(use.z) / (c * lim)
-    w = kappa * ex * (ex - 1.0) * np.maximum(a, floor) ** (ex - 2.0) / (c * c * lim * lim)
+    dz = powers(a, ex - 1.0) * np.sign(use.z) * (kappa * ex / (c * lim))
+    w = powers(np.maximum(a, floor), ex - 2.0) * (kappa * ex * (ex - 1.0) / (c * c * lim * lim))
     _gather(ops, dz, w, gq, M, pad)
     if use.ends is not None:  # the ends' stopping needs: one row per end and axis
         need, d1, d2, rows = use.ends
@@ -295,10 +295,16 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array,
         step_op = BandOps((1,), (m,), np.tile([[[-1.0], [1.0]]], (m, 1, 1)), 0, (0, m))
         _gather(step_op, dz[..., None], w[..., None], gq, M, pad)
     g = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
-    # H[k, d] = sum_i M[d, k, i] G[k, i]^T G[k + d, i]: frame k with frame k + d
-    g_pad = np.concatenate([G, np.zeros((width, 8, 2))])
-    g_win = np.lib.stride_tricks.sliding_window_view(g_pad, width, axis=0)[:n]  # (n,8,2,D)
-    H = np.einsum("dki,kip,kiqd->kdpq", M[:, pad:pad + n], G, g_win, optimize=True)
+    # H[k, d] = sum_i M[d, k, i] G[k, i]^T G[k + d, i]: frame k with frame k + d, one
+    # entry (p, q) at a time over contiguous (d, k, i) arrays
+    g_cols = np.zeros((2, n + width, 8))
+    g_cols[:, :n] = G.transpose(2, 0, 1)
+    H = np.empty((n, width, 2, 2))
+    for row in range(2):
+        left = M[:, pad:pad + n] * g_cols[row, :n]  # (d, k, i)
+        for col in range(2):
+            right = np.lib.stride_tricks.sliding_window_view(g_cols[col], n, axis=0)[:width]
+            H[:, :, row, col] = np.einsum("dki,dik->kd", left, right)
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
     # singularity distance itself), the worst frame's through its power mean
     e = cost.intrusion(y)
@@ -343,8 +349,8 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     in its value is dz[r, :, i] (rows, 8, k), its Gauss-Newton curvature w[r, :, i]: frame f
     gets sum coef[r, f - r - offset, i] dz[r, :, i], and the pair (f, f + d)
     sum coef[r, o, i] coef[r, o + d, i] w[r, :, i]. The shift-invariant rows are
-    correlations, one matrix product per kernel tap; the rows near the ends are added as
-    dense blocks.
+    correlations (the gradient: one product, then a shifted add per tap; the curvature: one
+    product over windows of rows); the rows near the ends are added as dense blocks.
     """
     coef = ops.coef
     rows, width, _ = coef.shape
@@ -352,11 +358,17 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     a, b = ops.inner
     if b > a:
         kern = coef[a]  # (width, k)
+        span = b - a + width - 1
+        taps = dz[a:b] @ kern.T  # (rows, 8, width): what row r gives frame r + o
         for o in range(width):
-            lo = base + a + o
-            gq[lo:lo + b - a] += dz[a:b] @ kern[o]
-            pairs = (kern[o] * kern[o:]).T  # (k, width - o): taps o and o + d
-            M[:width - o, lo:lo + b - a] += (w[a:b] @ pairs).transpose(2, 0, 1)
+            gq[base + a + o:base + b + o] += taps[:, :, o]
+        # the pair (f, f + d) gets sum over taps o of row f - o's w times the taps' product:
+        # one correlation over windows of rows
+        pairs = np.zeros((width, coef.shape[2], width))  # [o, i, d]: taps o and o + d
+        for d in range(width):
+            pairs[:width - d, :, d] = kern[:width - d] * kern[d:]
+        M[:width, base + a:base + a + span] += np.einsum(
+            "takj,jkd->dta", _windows(w[a:b], width), pairs[::-1], optimize=True)
     for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
         if hi <= lo:
             continue
@@ -371,6 +383,14 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
         full = (weighted @ c[:, None]).sum(axis=0)  # (8, span, span)
         at, dist = _upper_pairs(span, width)
         M[dist, f0 + at] += full[:, at, at + dist].T  # each (frame, distance) pair once
+
+
+def _windows(v: Array, width: int) -> Array:
+    """Windows (rows + width - 1, ..., width) over the rows of v (rows, ...): window t holds
+    rows t - width + 1 .. t (zero before the first and after the last row)."""
+    padded = np.zeros((v.shape[0] + 2 * (width - 1), *v.shape[1:]))
+    padded[width - 1:width - 1 + v.shape[0]] = v
+    return np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)
 
 
 @lru_cache(maxsize=64)

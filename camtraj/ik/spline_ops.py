@@ -60,7 +60,10 @@ class BandOps:
         if b <= a:
             return np.asarray(np.einsum("rwk,rmw->rmk", self.coef, win))
         out = np.empty((rows, q.shape[1], k))
-        out[a:b] = win[a:b] @ self.coef[a]  # the shift-invariant rows: one product
+        # the shift-invariant rows: one product, over windows along contiguous frame rows
+        frames = np.ascontiguousarray(self._padded(q).T)  # (m, rows + width)
+        inner = np.lib.stride_tricks.sliding_window_view(frames, width, axis=1)[:, a:b]
+        out[a:b] = (inner @ self.coef[a]).transpose(1, 0, 2)
         out[:a] = np.einsum("rwk,rmw->rmk", self.coef[:a], win[:a])
         out[b:] = np.einsum("rwk,rmw->rmk", self.coef[b:], win[b:])
         return out
