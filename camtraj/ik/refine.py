@@ -11,7 +11,9 @@ banded Cholesky solve gives the step (the power mean's concave root enters as a 
 correction). Each step is projected into the corridor (the frame's track interval, then
 extend's reach interval at that track); a frame the closed form cannot solve there keeps its
 previous values; a step is kept only if the exact objective drops, so the result is never
-worse than its start. A continuation raises the power in stages (:class:`Refinement`); from
+worse than its start, and a kept step is lengthened while that keeps lowering it (a line
+search: each trial at the minimum of the parabola through the objective, its slope and the
+last trial). A continuation raises the power in stages (:class:`Refinement`); from
 the second stage on, a use far below the peak is modelled with the curvature it would have
 near it (:data:`_STAGES`), so a step that would lift it there is not taken as free.
 """
@@ -171,14 +173,21 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
             if jn < j:
                 improved = True
                 # The model's curvature is an upper bound (the power mean's concave outer
-                # root is left out), so a good step is often too short: go on doubling it
-                # while that keeps lowering the objective.
+                # root is left out), so a good step is often too short: go on lengthening
+                # it while that keeps lowering the objective, each time to the minimum of
+                # the parabola through j, its slope along the step and the last value (2 to
+                # 16 times as far).
+                slope = float((g * step).sum())
+                t = 1.0
                 for _grow in range(6):
-                    step = 2.0 * step
-                    xg, yg, jg = _try_step(robot, cost, corridor, targets, branch, x, y, step)
+                    curve = (jn - j - t * slope) / (t * t)
+                    far = -slope / (2.0 * curve) if curve > 0.0 else math.inf
+                    t_next = min(max(far, 2.0 * t), 16.0 * t)
+                    xg, yg, jg = _try_step(robot, cost, corridor, targets, branch, x, y,
+                                           t_next * step)
                     if not jg < jn:
                         break
-                    xn, yn, jn = xg, yg, jg
+                    xn, yn, jn, t = xg, yg, jg, t_next
                 rel = (j - jn) / max(abs(j), 1e-300)
                 x, y, j = xn, yn, jn
                 mu = max(mu / 4.0, 1e-9)
