@@ -55,13 +55,14 @@ class BandOps:
     def apply(self, q: Array) -> Array:
         """Values (rows, m, k) for frame values q (n, m)."""
         rows, width, k = self.coef.shape
-        win = np.lib.stride_tricks.sliding_window_view(self._padded(q), width, axis=0)[:rows]
+        padded = self._padded(q)
+        win = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)[:rows]
         a, b = self.inner
         if b <= a:
             return np.asarray(np.einsum("rwk,rmw->rmk", self.coef, win))
         out = np.empty((rows, q.shape[1], k))
         # the shift-invariant rows: one product, over windows along contiguous frame rows
-        frames = np.ascontiguousarray(self._padded(q).T)  # (m, rows + width)
+        frames = np.ascontiguousarray(padded.T)  # (m, rows + width)
         inner = np.lib.stride_tricks.sliding_window_view(frames, width, axis=1)[:, a:b]
         out[a:b] = (inner @ self.coef[a]).transpose(1, 0, 2)
         out[:a] = np.einsum("rwk,rmw->rmk", self.coef[:a], win[:a])
