@@ -73,23 +73,15 @@ def margin_peak(e: Array) -> tuple[float, Array]:
 def powers(a: Array, ex: Array) -> Array:
     """``a ** ex`` for a (..., k) >= 0 and one exponent per column, ex (k,). The
     continuation's exponents are whole numbers (power / order: 6 / 3 = 2, ..., 48 / 1 = 48),
-    taken by repeated squaring, which is several times faster than ``pow`` and as exact; a
-    run of columns with the same exponent is done at once."""
-    k = ex.shape[0]
-    columns = np.ascontiguousarray(np.moveaxis(a, -1, 0))  # (k, ...): each column contiguous
-    out = np.empty_like(columns)
-    lo = 0
-    while lo < k:
-        hi = lo + 1
-        while hi < k and ex[hi] == ex[lo]:
-            hi += 1
-        e = float(ex[lo])
-        part = columns[lo:hi]
-        if e.is_integer() and 0.0 <= e <= 1024.0:
-            out[lo:hi] = _whole_power(part, int(e))
-        else:
-            out[lo:hi] = part ** e
-        lo = hi
+    taken by repeated squaring, which is several times faster than ``pow`` and as exact; the
+    columns with the same exponent are done at once."""
+    columns = np.moveaxis(a, -1, 0)  # (k, ...)
+    out = np.empty(columns.shape)
+    for e in np.unique(ex):
+        pick = ex == e
+        part = columns[pick]  # a contiguous copy of the columns with this exponent
+        whole = float(e).is_integer() and 0.0 <= e <= 1024.0
+        out[pick] = _whole_power(part, int(e)) if whole else part ** e
     return np.moveaxis(out, 0, -1)
 
 
