@@ -359,7 +359,8 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     gets sum coef[r, f - r - offset, i] dz[r, :, i], and the pair (f, f + d)
     sum coef[r, o, i] coef[r, o + d, i] w[r, :, i]. The shift-invariant rows are
     correlations (the gradient: one product, then a shifted add per tap; the curvature: one
-    product over windows of rows); the rows near the ends are added as dense blocks.
+    product over windows of rows); the rows near the ends, each with its own weights, as one
+    batched product of their taps' pair products.
     """
     coef = ops.coef
     rows, width, _ = coef.shape
@@ -381,17 +382,27 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
         if hi <= lo:
             continue
-        # rows lo..hi read frames lo + offset .. hi - 1 + offset + width - 1: as dense
-        # (k, rows, frames) matrices C, they add C^T dz and C^T diag(w) C (per axis)
-        c = _dense_rows(coef[lo:hi])
+        # rows with their own weights (near the ends): row r gives frame r + o the tap
+        # coef[r, o] dz[r] and the pair (r + o, r + o + d) coef[r, o] coef[r, o + d] w[r],
+        # one batched product per row, then one shifted add per tap
         f0 = base + lo
-        span = c.shape[2]
-        ct = c.transpose(0, 2, 1)  # (k, frames, rows)
-        gq[f0:f0 + span] += (ct @ dz[lo:hi].transpose(2, 0, 1)).sum(axis=0)
-        weighted = ct[:, None] * w[lo:hi].transpose(2, 1, 0)[:, :, None, :]  # (k, 8, s, r)
-        full = (weighted @ c[:, None]).sum(axis=0)  # (8, span, span)
-        at, dist = _upper_pairs(span, width)
-        M[dist, f0 + at] += full[:, at, at + dist].T  # each (frame, distance) pair once
+        count = hi - lo
+        taps = coef[lo:hi] @ dz[lo:hi].transpose(0, 2, 1)  # (rows, width, 8)
+        pair_w = (_pair_products(coef[lo:hi]) @ w[lo:hi].transpose(0, 2, 1)).reshape(
+            count, width, width, -1)  # (rows, o, d, 8)
+        for o in range(width):
+            gq[f0 + o:f0 + o + count] += taps[:, o]
+            M[:, f0 + o:f0 + o + count] += pair_w[:, o].transpose(1, 0, 2)
+
+
+def _pair_products(coef: Array) -> Array:
+    """coef[r, o, i] coef[r, o + d, i] (zero where o + d is past the row) as (rows,
+    width * width, k), index o * width + d."""
+    rows, width, k = coef.shape
+    out = np.zeros((rows, width, width, k))
+    for d in range(width):
+        out[:, :width - d, d] = coef[:, :width - d] * coef[:, d:]
+    return out.reshape(rows, width * width, k)
 
 
 def _windows(v: Array, width: int) -> Array:
@@ -400,24 +411,6 @@ def _windows(v: Array, width: int) -> Array:
     padded = np.zeros((v.shape[0] + 2 * (width - 1), *v.shape[1:]))
     padded[width - 1:width - 1 + v.shape[0]] = v
     return np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)
-
-
-@lru_cache(maxsize=64)
-def _upper_pairs(span: int, width: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Frame f and distance d of every pair (f, f + d), d < width, inside ``span`` frames."""
-    f, d = np.meshgrid(np.arange(span), np.arange(width), indexing="ij")
-    keep = f + d < span
-    return f[keep], d[keep]
-
-
-def _dense_rows(coef: Array) -> Array:
-    """Operator rows coef (rows, width, k) as dense (k, rows, rows + width - 1) matrices whose
-    column j is the first row's first frame + j."""
-    rows, width, k = coef.shape
-    out = np.zeros((k, rows, rows + width - 1))
-    r = np.arange(rows)[:, None]
-    out[:, r, r + np.arange(width)[None, :]] = coef.transpose(2, 0, 1)
-    return out
 
 
 def _solve_rank1(H: Array, g: Array, mu: float, w: Array, c: float) -> Array:
