@@ -89,9 +89,10 @@ class _Move:
         self.rest_position = np.array(rest, dtype=np.float64)
         # Position range of the move, exactly, from ruckig's per-axis phases (its own
         # position_extrema is not reliable with the velocity interface).
-        ranges = np.array([_phase_range(prof) for prof in traj.profiles[0]])
-        self._phases = [_phases(prof) for prof in traj.profiles[0]]
-        if any(prof.accel.duration > 0.0 for prof in traj.profiles[0]):  # pragma: no cover
+        profiles = traj.profiles[0]
+        self._phases = [_phases(prof) for prof in profiles]
+        ranges = np.array([_phase_range(seg) for seg, _, _ in self._phases])
+        if any(prof.accel.duration > 0.0 for prof in profiles):  # pragma: no cover
             msg = f"ruckig planned {what} with a final acceleration phase (not expected)"
             raise TimingLimitError(msg)
         self.min = np.minimum(ranges[:, 0], self.rest_position)
@@ -135,14 +136,15 @@ class _Move:
 
 def _phases(profile: Any) -> tuple[Array, Array, tuple[float, float, float]]:
     """One axis's ruckig profile as phases of constant jerk: rows (p, v, a, j, duration) at
-    each phase's start, the phases' start times, and the state at its end (p, v, a)."""
-    rows = [(profile.brake.p[i], profile.brake.v[i], profile.brake.a[i], profile.brake.j[i],
-             profile.brake.t[i]) for i in range(2)]
-    rows += [(profile.p[i], profile.v[i], profile.a[i], profile.j[i], profile.t[i])
-             for i in range(7)]
-    seg = np.array(rows, dtype=np.float64)
+    each phase's start, the phases' start times, and the state at its end (p, v, a).
+
+    Each of the profile's fields is read once (every read converts the whole field)."""
+    brake = profile.brake
+    p, v, a = profile.p, profile.v, profile.a
+    seg = np.array([[*brake.p[:2], *p[:7]], [*brake.v[:2], *v[:7]], [*brake.a[:2], *a[:7]],
+                    [*brake.j[:2], *profile.j[:7]], [*brake.t[:2], *profile.t[:7]]]).T
     start = np.concatenate([[0.0], np.cumsum(seg[:-1, 4])])
-    return seg, start, (float(profile.p[7]), float(profile.v[7]), float(profile.a[7]))
+    return seg, start, (float(p[7]), float(v[7]), float(a[7]))
 
 
 def _stop_move(p: Array, v: Array, a: Array, limits: Limits) -> _Move:
@@ -185,19 +187,15 @@ def stop_peak_velocity(v: Array, a: Array, limits: Limits) -> Array:
     return out
 
 
-def _phase_range(profile: Any) -> tuple[float, float]:
-    """Lowest and highest position of one axis's ruckig profile.
+def _phase_range(seg: Array) -> tuple[float, float]:
+    """Lowest and highest position of one axis's phases (:func:`_phases`' rows).
 
     A profile is an optional two-phase brake followed by seven phases, each of constant
     jerk; inside a phase the position is a cubic whose extrema are where the velocity (a
     quadratic) is zero.
     """
-    starts = [(profile.brake.p[i], profile.brake.v[i], profile.brake.a[i],
-               profile.brake.j[i], profile.brake.t[i]) for i in range(2)]
-    starts += [(profile.p[i], profile.v[i], profile.a[i], profile.j[i], profile.t[i])
-               for i in range(7)]
     lo, hi = math.inf, -math.inf
-    for p0, v0, a0, j, dur in starts:
+    for p0, v0, a0, j, dur in seg.tolist():
         if dur <= 0.0:
             continue
         cands = [0.0, dur]
