@@ -547,6 +547,22 @@ def test_nearly_still_camera_caps_the_speed_shown(tmp_path: Path) -> None:
     assert max(int(n) for n in re.findall(r"\d+", line)) <= 10000 * 24, line
 
 
+@pytest.mark.parametrize("frames", [2, 3, 4])
+def test_the_shortest_moves_convert(tmp_path: Path, frames: int) -> None:
+    """Two to four frames of a moving camera convert (three frames once crashed the solver's
+    spline operators: three points leave no third difference)."""
+    stage = _stage(tmp_path / f"short{frames}.usda", end=frames)
+    _camera(stage, move=0.01 * (frames - 1))
+    stage.GetRootLayer().Save()
+    out, summary = tmp_path / f"short{frames}.mcap", tmp_path / f"short{frames}.json"
+    proc = run_cli("convert", tmp_path / f"short{frames}.usda", "-o", out, "--summary", summary)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    data = json.loads(summary.read_text(), parse_constant=_no_constant)
+    assert data["frames"]["count"] == frames
+    assert out.stat().st_size > 0
+
+
 def _no_constant(name: str) -> None:
     msg = f"{name} is not JSON"
     raise ValueError(msg)

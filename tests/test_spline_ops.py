@@ -31,7 +31,7 @@ def smooth_path(robot: Robot, n: int, seed: int) -> np.ndarray:
     return mid + half * (0.2 * t + waves)
 
 
-@pytest.mark.parametrize("n", [5, 40, 150, 400])
+@pytest.mark.parametrize("n", [3, 4, 5, 40, 150, 400])
 def test_operators_give_the_timing_stages_spline(robot: Robot, n: int) -> None:
     """Velocity, acceleration and jerk at every knot and piece middle, per knot interval^k:
     the operators against FramePath's own polynomials (cut to a band of 14 frames: within 3%

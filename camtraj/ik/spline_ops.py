@@ -128,8 +128,12 @@ def spline_ops(n: int) -> BandOps:
         wa, oa = width - d, -k
         idx = np.arange(rows_m)[:, None] + oa + np.arange(wa)[None, :]
         inside = (idx >= 0) & (idx < m - d)
-        band = np.where(inside, weights[np.arange(rows_m)[:, None], np.clip(idx, 0, m - d - 1)],
-                        0.0)
+        if m > d:
+            band = np.where(inside,
+                            weights[np.arange(rows_m)[:, None], np.clip(idx, 0, m - d - 1)],
+                            0.0)
+        else:  # d or fewer frames lie on a polynomial below degree d: the derivative is zero
+            band = np.zeros(idx.shape)
         rows = rows_m + (n - m)
         a = np.zeros((rows, wa))
         if small:
