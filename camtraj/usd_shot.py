@@ -402,6 +402,7 @@ def _read(
             _focal_length_warning(
                 cam_path, lens["focalLength"], focal_length_mm, meters_per_unit,
                 focal_length_unit, frame_numbers,
+                is_authored=cam.GetFocalLengthAttr().HasAuthoredValue(),
             ),
             _film_back_warning(
                 cam_path, lens["horizontalAperture"], aperture_mm[0], meters_per_unit,
@@ -741,12 +742,15 @@ def _focal_length_warning(
     meters_per_unit: float,
     unit: str,
     frames: NDArray[np.int64],
+    *,
+    is_authored: bool = True,
 ) -> str | None:
     """A note when the focal length is outside what real lenses have, saying which reading fits.
 
     Args:
-        authored: (n,) ``focalLength`` as authored.
+        authored: (n,) ``focalLength`` as authored (USD's fallback where it is not).
         focal_length_mm: (n,) the focal length as read [mm].
+        is_authored: Whether the camera has a ``focalLength`` at all.
     """
     lo, hi = _PLAUSIBLE_FOCAL_MM
     bad = (focal_length_mm < lo) | (focal_length_mm > hi)
@@ -755,6 +759,12 @@ def _focal_length_warning(
     i = int(np.flatnonzero(bad)[0])
     value, mm = float(authored[i]), float(focal_length_mm[i])
     where = f"at frame {int(frames[i])}"
+    if not is_authored:
+        return (
+            f"camera {cam_path} has no focalLength: USD's fallback {value:g} (tenths of a "
+            f"scene unit, here {meters_per_unit:g} m) reads as {mm:g} mm, outside the "
+            f"{lo:g}-{hi:g} mm of real lenses; author the focal length to record it"
+        )
     plausible_raw = bool(np.all((authored >= lo) & (authored <= hi)))
     if unit == "schema" and plausible_raw:
         return (

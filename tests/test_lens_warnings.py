@@ -146,6 +146,22 @@ def test_film_back_in_millimetres_on_a_metre_stage_is_warned(tmp_path: Path) -> 
     assert _read(stage, focal_length_unit="mm").warnings == ()
 
 
+def test_a_camera_without_a_focal_length_is_not_blamed_on_an_exporter(tmp_path: Path) -> None:
+    """No focalLength at all: USD's fallback (50 tenths of a unit, 5000 mm on a metre stage)
+    is said to be the fallback, not millimetres an exporter wrote."""
+    stage = _stage(tmp_path / "nofocal.usda")
+    cam = UsdGeom.Camera.Define(stage, "/cam")
+    cam.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 1.0))
+    shot = _read(stage)
+    focal = [w for w in shot.warnings if "focal" in w]
+    assert focal == ["camera /cam has no focalLength: USD's fallback 50 (tenths of a scene "
+                     "unit, here 1 m) reads as 5000 mm, outside the 4-1200 mm of real lenses; "
+                     "author the focal length to record it"]
+    # authored, the same value is the exporter's millimetres
+    cam.GetFocalLengthAttr().Set(50.0)
+    assert any("older exporter" in w for w in _read(stage).warnings)
+
+
 def test_millimetres_on_an_inch_stage_are_warned(tmp_path: Path) -> None:
     stage = _stage(tmp_path / "inch.usda", mpu=0.0254)
     cam = _camera(stage, focal=35.0)
