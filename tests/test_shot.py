@@ -16,7 +16,7 @@ import pytest
 from camtraj import Robot
 from camtraj.ik import path_margins, solve_path, solve_path_report
 from camtraj.ik.refine import refine
-from camtraj.ik.shot import candidates, chain_costs, choose, viterbi
+from camtraj.ik.shot import candidates, chain_costs, choose, choose_each, viterbi
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.timing import Limits
 
@@ -149,14 +149,30 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
                 assert best[c] == pytest.approx(brute, rel=1e-12)
             else:
                 assert not math.isfinite(best[c])
-    # the tables say what a path costs: recompute the chosen path's cost from its joints
-    choice = choose(cost, cand, robot.home)
-    assert choice is not None
-    y = choice.y
-    q = y[:, :8]
-    direct = float(cost.unary(y).sum() + cost.first_order(cost.steps(q[:-1], q[1:])).sum()
-                   + cost.edge_cost(q[0], q[1]) + cost.edge_cost(q[-1], q[-2]))
-    assert choice.cost == pytest.approx(direct, rel=1e-9)
+    # the tables say what a path costs: recompute each label's path cost from its joints;
+    # one path per label that reaches every frame, cheapest first, the first is choose's
+    choices = choose_each(cost, cand, robot.home)
+    alive = np.flatnonzero(cand.ok.any(axis=1).all(axis=0))
+    assert len(choices) == alive.size > 0
+    assert sorted(int(c.branch[0]) for c in choices) == alive.tolist()
+    assert [c.cost for c in choices] == sorted(c.cost for c in choices)
+    first = choose(cost, cand, robot.home)
+    assert first is not None and first.cost == choices[0].cost
+    assert np.array_equal(first.point, choices[0].point)
+    rows = np.arange(cand.r1.shape[0])
+    for choice in choices:
+        assert np.all(choice.branch == choice.branch[0])
+        # the programme's own values (revolute steps the shorter way round) ...
+        y = cand.y[rows, choice.point, choice.branch]
+        # ... and the answer's: the same angles, made continuous inside the limits
+        turns = (choice.y[:, :8] - y[:, :8]) / (2.0 * np.pi)
+        assert np.allclose(turns, np.rint(turns), atol=1e-12)
+        assert np.all(choice.y[:, :8] >= cost.lower - 1e-9)
+        assert np.all(choice.y[:, :8] <= cost.upper + 1e-9)
+        q = y[:, :8]
+        direct = float(cost.unary(y).sum() + cost.first_order(cost.steps(q[:-1], q[1:])).sum()
+                       + cost.edge_cost(q[0], q[1]) + cost.edge_cost(q[-1], q[-2]))
+        assert choice.cost == pytest.approx(direct, rel=1e-9)
 
 
 @pytest.mark.parametrize("n", [12, 30, 120])

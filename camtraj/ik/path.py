@@ -14,7 +14,7 @@ from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
 from camtraj.ik.refine import REFINE_STAGES, Refinement
-from camtraj.ik.shot import Candidates, candidates, choose, measures
+from camtraj.ik.shot import Candidates, candidates, choose_each, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.robot import Robot
@@ -198,12 +198,15 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`).
 
     The dynamic programme chooses by frame-to-frame differences, a proxy for the take's
-    speed, so the refinement starts from two of its answers: on the robot file's candidate
-    grid and on the grid with half the track values (a different set of points, so another
-    basin where the proxy misleads). Both run the continuation's first stage, which settles
-    the basin; the faster take, as the timing stage measures it, runs the remaining stages
-    (both do when they are within :data:`CLOSE_STARTS` of each other), and the fastest
-    answer wins.
+    speed, so the refinement starts from several of its answers: on the robot file's
+    candidate grid, the cheapest path of each arm configuration (rotate towards or away
+    from the target, elbow up or down: the proxy often ranks them wrongly, most of all when
+    the shot is faster than the robot), and on the grid with half the track values its
+    cheapest (a different set of points, so another basin where the proxy misleads). Each
+    runs the continuation's first stage, which settles the basin; the fastest take, as the
+    timing stage measures it, runs the remaining stages (with every start within
+    :data:`CLOSE_STARTS` of it, and the grids' own cheapest answers as they would without
+    the other arms), and the fastest answer wins.
     ``progress`` is called after each step (a start's programme, a refinement stage) with
     that step's share of the n frames (the shares add up to n).
     """
@@ -226,21 +229,28 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
             progress(round(n * (done[0] + 1) / total) - round(n * done[0] / total))
         done[0] += 1
 
-    runs = []
-    for n_track, n_extend in grids:
-        branch, x0, y0, lo1, hi1 = _programme(robot, cost, targets, start, frames, n_track,
-                                              n_extend)
+    runs, firsts = [], []
+    for i, (n_track, n_extend) in enumerate(grids):
+        starts = _programme(robot, cost, targets, start, frames, n_track, n_extend)
+        starts = _one_per_arm(starts) if i == 0 else starts[:1]
         step()
-        run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
-                         rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                         take_speed=take_speed)
-        run.stage()
+        for k, (branch, x0, y0, lo1, hi1) in enumerate(starts):
+            run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
+                             rounds=s.refine_rounds, tolerance=s.refine_tolerance,
+                             take_speed=take_speed)
+            run.stage()
+            runs.append(run)
+            if k == 0:
+                firsts.append(run)
         step()
-        runs.append(run)
     # the starts within a hundredth of the fastest all go on (a near tie after one stage
-    # says little about which basin is better)
+    # says little about which basin is better), and so do the grids' own choices that would
+    # have gone on without the other arms' starts: the answer is never slower than theirs
     top = max(r.best[0] for r in runs)
     going = [r for r in runs if r.best[0] >= (1.0 - CLOSE_STARTS) * top]
+    top_first = max(r.best[0] for r in firsts)
+    going += [r for r in firsts
+              if r not in going and r.best[0] >= (1.0 - CLOSE_STARTS) * top_first]
     for _ in range(REFINE_STAGES - 1):
         for r in going:
             r.stage()
@@ -248,25 +258,48 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     return max((r.result() for r in going), key=lambda ref: ref.speed).y[:, :8]
 
 
+_Start = tuple[NDArray[np.intp], Array, Array, Array, Array]
+"""A refinement's start: branch per frame, track/extend (n, 2), measures (n, 10) and the
+track interval each frame stays in (lo, hi) (n,) each."""
+
+
 def _programme(robot: Robot, cost: ShotCost, targets: Array, start: Array,
-               frames: NDArray[np.int_], n_track: int,
-               n_extend: int) -> tuple[NDArray[np.intp], Array, Array, Array, Array]:
-    """The dynamic programme's answer on a candidate grid, as a refinement's start: branch
-    per frame, track/extend (n, 2), measures (n, 10) and the track interval each frame stays
-    in (its candidates are freed on return: they are the solver's largest arrays)."""
+               frames: NDArray[np.int_], n_track: int, n_extend: int) -> list[_Start]:
+    """The dynamic programme's answers on a candidate grid (one per branch label that
+    reaches every frame, cheapest first), as refinements' starts: branch per frame,
+    track/extend (n, 2), measures (n, 10) and the track interval each frame stays in (its
+    candidates are freed on return: they are the solver's largest arrays)."""
     n = targets.shape[0]
     cand = candidates(robot, targets, n_track, n_extend)
     cand = _rescue_empty_frames(robot, targets, cand, frames)
-    choice = choose(cost, cand, start)
-    if choice is None:  # pragma: no cover - every frame has a feasible candidate by now
+    choices = choose_each(cost, cand, start)
+    if not choices:  # pragma: no cover - every frame has a feasible candidate by now
         msg = "internal error: no candidate path through the shot"
         raise RuntimeError(msg)
     rows = np.arange(n)
-    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
-    j = cand.interval[rows, choice.point]
-    lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
-    return (choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
-            np.maximum(hi1, x0[:, 0]))
+    out = []
+    for choice in choices:
+        x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
+        j = cand.interval[rows, choice.point]
+        lo1, hi1 = cand.track_lo[rows, j], cand.track_hi[rows, j]
+        out.append((choice.branch, x0, choice.y, np.minimum(lo1, x0[:, 0]),
+                    np.maximum(hi1, x0[:, 0])))
+    return out
+
+
+def _one_per_arm(starts: list[_Start]) -> list[_Start]:
+    """The cheapest of the programme's answers (cheapest first) for each arm configuration:
+    rotate towards or away from the target, elbow up or down. The two wrist flips of one arm
+    move the wrist axes by the same amounts (pan and roll half a turn apart, tilt mirrored):
+    the programme's margins choose between them."""
+    seen: set[int] = set()
+    out = []
+    for st in starts:
+        arm = int(st[0][0]) >> 1  # branch bits: rotate back (4), elbow (2), wrist flip (1)
+        if arm not in seen:
+            seen.add(arm)
+            out.append(st)
+    return out
 
 
 def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,

@@ -13,7 +13,8 @@ closed-form branch are chosen for the whole shot, not frame by frame:
    A chain keeps one branch label for the whole shot (a label changes only where two branches
    meet, at a singularity the margins keep away from); if no label reaches every frame, the
    chains are merged and labels may change wherever the step stays cheap. The first frame is
-   free: the run-up brings the robot there.
+   free: the run-up brings the robot there. Each label's cheapest path is an answer
+   (:func:`choose_each`): the solver refines from one per arm configuration.
 3. Refinement (:mod:`refine`): the chosen track/extend curves move continuously inside each
    frame's feasible corridor to lower the full objective, acceleration and jerk included, so
    the answer is not quantised to the grid. Every frame stays an exact closed-form solution.
@@ -284,43 +285,60 @@ class DPChoice:
 
 
 def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
-    """Run the dynamic programme (per branch label, then merged if none reaches every frame).
+    """The dynamic programme's cheapest answer (:func:`choose_each`'s first), None when no
+    sequence of candidates reaches every frame."""
+    choices = choose_each(cost, cand, start)
+    return choices[0] if choices else None
 
-    Revolute steps are first taken the shorter way round; if the chosen path, made
+
+def choose_each(cost: ShotCost, cand: Candidates, start: Array) -> list[DPChoice]:
+    """Run the dynamic programme: the cheapest path of each branch label that reaches every
+    frame, cheapest first (one path over the merged chains if no label does; none if no
+    sequence of candidates reaches every frame).
+
+    Revolute steps are first taken the shorter way round; if a chosen path, made
     continuous, cannot stay inside the position limits (a rotation of more than the range
     allows), the programme runs again on the candidates as :func:`lanes` (values that are
-    the path itself, inside the limits), so every answer is inside the limits: an
-    unavoidable wrap shows as the large step it is.
-
-    Returns None when no sequence of candidates reaches every frame.
+    the path itself, inside the limits) and that label's path is taken from there, so every
+    answer is inside the limits: an unavoidable wrap shows as the large step it is.
     """
-    choice = _choose(cost, cand, wrap=True)
-    if choice is None:
-        return None
-    y = choice.y.copy()
-    y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
-    if inside_limits(y[:, :8], cost.lower, cost.upper):
-        return DPChoice(choice.cost, choice.point, choice.branch, y)
-    laned = replace(cand, y=lanes(cand.y, cost.lower, cost.upper, start))
-    return _choose(cost, laned, wrap=False)
+    out: list[DPChoice] = []
+    laned: dict[int, DPChoice] | None = None
+    for choice in _choose(cost, cand, wrap=True):
+        y = choice.y.copy()
+        y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
+        if inside_limits(y[:, :8], cost.lower, cost.upper):
+            out.append(DPChoice(choice.cost, choice.point, choice.branch, y))
+            continue
+        if laned is None:
+            again = replace(cand, y=lanes(cand.y, cost.lower, cost.upper, start))
+            laned = {int(c.branch[0]): c for c in _choose(cost, again, wrap=False)}
+        if int(choice.branch[0]) in laned:
+            out.append(laned[int(choice.branch[0])])
+    return sorted(out, key=lambda c: c.cost)
 
 
-def _choose(cost: ShotCost, cand: Candidates, wrap: bool) -> DPChoice | None:
+def _choose(cost: ShotCost, cand: Candidates, wrap: bool) -> list[DPChoice]:
+    """The cheapest path of each label that reaches every frame (else of the merged chains),
+    cheapest first."""
     n, g = cand.r1.shape
     for merged in (False, True):
         unary, steps = chain_costs(cost, cand, merged, wrap)
         best, path = viterbi(unary, steps)
-        if best.size == 0:
-            continue
-        c = int(np.argmin(best))
-        if math.isfinite(best[c]):
+        labels = (np.zeros(1, dtype=np.intp) if merged
+                  else np.flatnonzero(cand.ok.any(axis=1).all(axis=0)))
+        out = []
+        for c in np.argsort(best, kind="stable"):
+            if not math.isfinite(best[c]):
+                break
             states = path[c]
-            label = c if merged else int(np.flatnonzero(cand.ok.any(axis=1).all(axis=0))[c])
-            branch = states // g if merged else np.full(n, label)
+            branch = states // g if merged else np.full(n, labels[c])
             point = states % g if merged else states
             y = cand.y[np.arange(n), point, branch].copy()
-            return DPChoice(float(best[c]), point, branch, y)
-    return None
+            out.append(DPChoice(float(best[c]), point, branch, y))
+        if out:
+            return out
+    return []
 
 
 def inside_limits(q: Array, lower: Array, upper: Array) -> bool:
