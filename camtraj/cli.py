@@ -447,6 +447,15 @@ MAX_SHOWN_SPEED = 100.0
 """Above this many times real time the report says ">10000%" (the number means nothing)."""
 
 
+def _servo_text(r: dict[str, Any]) -> str:
+    """The servo grid: its rate, or where an optimal retime's steps vary, their range."""
+    short, long = r.get("servo_step_ms") or (0.0, 0.0)
+    if long - short <= 1e-6 * long:
+        return f"servo {r['servo_rate_hz']:.1f} Hz"
+    return (f"servo steps {short:.3f}-{long:.3f} ms (each frame interval in equal steps, "
+            "every frame a sample: not a fixed period)")
+
+
 def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
     """'131% of real time (… 31.54 fps)'; a still camera's speed is unbounded (JSON: null)."""
     if max_speed is None or not math.isfinite(max_speed):
@@ -506,8 +515,7 @@ def _report(r: dict[str, Any]) -> str:
         f"({fr['count']} at {r['fps']:g} fps)",
         f"  timing {r['timing']}: take {seconds(r['duration'])} s (shot "
         f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
-        f"speed factor {r['speed_factor']:.3f}, "
-        f"servo {r['servo_rate_hz']:.1f} Hz",
+        f"speed factor {r['speed_factor']:.3f}, {_servo_text(r)}",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
         "(extent)   margin  to start",

@@ -424,7 +424,9 @@ def summary(
         "timing": take.mode,
         "edges": take.report.runup.get("edges", options.edges),  # gentle, unless it costs speed
         "speed_factor": float(take.speed_factor),
-        "servo_rate_hz": float(take.rate),
+        "servo_rate_hz": round(float(take.rate), 9),  # 250.0, not 249.99999999999977
+        # an optimal retime cuts each frame interval into its own equal steps: they vary
+        "servo_step_ms": [round(1e3 * float(step), 6) for step in _step_range(take.t)],
         "duration": float(take.duration),
         "shot_start": float(take.shot_start),
         "shot_end": float(take.shot_end),
@@ -441,6 +443,12 @@ def summary(
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }
+
+
+def _step_range(t: Array) -> tuple[float, float]:
+    """Shortest and longest step [s] between the take's servo samples."""
+    steps = np.diff(t)
+    return (float(steps.min()), float(steps.max())) if steps.size else (0.0, 0.0)
 
 
 def _move_to_start(path: PathSolution) -> dict[str, Any]:

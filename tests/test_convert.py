@@ -483,6 +483,24 @@ def test_optimal_timing_is_not_slower_than_scale(runs: dict[str, Run]) -> None:
     assert length["optimal"] <= length["scale"] * (1 + 1e-9), length
 
 
+def test_the_servo_steps_printed_are_the_takes(runs: dict[str, Run]) -> None:
+    """A uniform take prints its rate; an optimal retime, whose steps vary from frame
+    interval to frame interval, prints their range: both as read back from the MCAP."""
+    for name in ("whip_scale", "whip_optimal"):
+        run = runs[name]
+        steps = np.diff(run.take().t) * 1e3  # ms
+        summary = run.summary_json()
+        assert summary["servo_step_ms"] == pytest.approx([steps.min(), steps.max()], abs=2e-6)
+        line = next(x for x in run.proc.stdout.splitlines() if "timing " in x)
+        varies = np.ptp(steps) > 1e-6 * steps.max()
+        assert varies == (name == "whip_optimal")
+        if varies:
+            assert (f"servo steps {steps.min():.3f}-{steps.max():.3f} ms" in line
+                    and "not a fixed period" in line), line
+        else:
+            assert f"servo {1e3 / steps.max():.1f} Hz" in line, line
+
+
 # --------------------------------------------------------------------------------------------
 # 5. Frames outside the workspace
 # --------------------------------------------------------------------------------------------
