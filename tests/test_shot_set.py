@@ -187,6 +187,35 @@ def test_the_feasible_frame_rate_does_not_depend_on_the_authored_rate(
         + ", ".join(f"{f:g} fps -> {r:.1f} fps" for f, r in rates.items()))
 
 
+def test_a_take_slower_than_its_maximum_speed_settles_gently(
+        robot: Robot, tmp_path: Path) -> None:
+    """The push at 24 fps plays up to about 5x faster, where its run-up and run-out need the
+    full limits (gentle ends would need a slower take). Timed at its own speed it has room
+    to settle gently: its ends are gentle, inside every limit, and its maximum feasible
+    speed is still the one the full limits allow."""
+    def push(_t: Array, u: Array) -> Cam:
+        n = u.shape[0]
+        return Cam(_line(u, (2.0, 0.0, 1.4), (3.5, 0.0, 1.4)), np.zeros(n), np.full(n, -2.29))
+
+    shot = read_shot(write_design(Design("gentle push", push, 47.0 / 24.0, 24.0), tmp_path))
+    q = solve_path(robot, shot.cam2world @ np.linalg.inv(robot.camera2flange),
+                   frame_interval=1.0 / 24.0)
+    limits = Limits.from_robot(robot)
+    times = np.arange(q.shape[0]) / 24.0
+    fast = time_shot(q, times, limits, mode="shot", edges="fast")
+    take = time_shot(q, times, limits, mode="shot")
+    gentle_max = time_shot(q, times, limits, mode="scale", edges="gentle")
+    assert fast.report.max_speed > 1.5  # the full limits allow a much faster take
+    assert take.report.runup["edges"] == take.report.runout["edges"] == "gentle"
+    assert not any("gentle run-up/run-out would need" in w for w in take.report.warnings)
+    assert take.report.max_speed == pytest.approx(fast.report.max_speed, rel=1e-9)
+    assert take_problems(take, limits) == []
+    # and the gentle ends were the costly ones at that speed: the report says the scale
+    # take's maximum feasible speed uses the full limits
+    assert gentle_max.report.max_speed == pytest.approx(fast.report.max_speed, rel=1e-9)
+    assert take.report.runup["duration"] > fast.report.runup["duration"]
+
+
 # --------------------------------------------------------------------------------------------
 # (b), (c) every shot converts with shot or scale timing, inside every limit
 # --------------------------------------------------------------------------------------------

@@ -217,12 +217,15 @@ def time_shot(
     # the real-time grid is kept only where it is the take's stream
     real, grid = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames,
                               keep=mode == "shot")
+    asked = edges  # gentle ends are kept wherever they fit the speed the take runs at
     edge_note = []
     if real.edges != edges:
-        cost = (f"a {real.gentle_need / real.need:.2f}x slower take"
-                if math.isfinite(real.gentle_need) else "more room than the limits leave")
-        edge_note.append(f"a gentle run-up/run-out would need {cost}: the ends use the full "
-                         "acceleration and jerk limits (as --edges fast)")
+        ratio = real.gentle_need / real.need
+        cost = (f"a {ratio:.2f}x slower take" if ratio >= 1.1 else f"a {ratio:.4f}x slower take"
+                ) if math.isfinite(ratio) else "more room than the limits leave"
+        why = f" ({real.gentle_problem})" if real.gentle_problem else ""
+        edge_note.append(f"a gentle run-up/run-out would need {cost}{why}: the ends use the "
+                         "full acceleration and jerk limits (as --edges fast)")
         edges = real.edges
     path, fit, need, max_speed = real.path, real.fit, real.need, real.max_speed
     ticks0, limiting = real.ticks, real.limiting
@@ -231,7 +234,7 @@ def time_shot(
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
 
     def scaled(floor: float = 1.0) -> tuple[float, int, Samples, Array, Edge, Edge]:
-        return _scale(path, dt, rate, limits, need, fit, start_q, floor)
+        return _scale(path, dt, rate, limits, need, fit, start_q, floor, asked)
 
     warnings: list[str] = list(edge_note)
     if mode == "shot":
@@ -245,7 +248,8 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         try:
-            up, out = _build_edges(shot, limits, edges, start_q, 1.0 / shot_rate, frames)
+            up, out = _edges_as_asked(shot, limits, asked, edges, start_q, 1.0 / shot_rate,
+                                      frames)
         except TimingLimitError as exc:  # a grid effect at the margin: say what scale does
             raise _shot_mode_error([], None, max_speed, fps, scaled, str(exc)) from None
     elif mode == "scale":
@@ -277,7 +281,7 @@ def time_shot(
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
             ticks = 0  # samples per frame vary
             shot_rate = 0.0
-            up, out = _build_edges(shot, limits, edges, start_q, 1.0 / rate, frames)
+            up, out = _edges_as_asked(shot, limits, asked, edges, start_q, 1.0 / rate, frames)
 
     # Position limits of the shot part as sampled in the take.
     pos_bad = [v for v in violations(shot, limits, FrameMap.of(shot_x, frames), LIMIT_RTOL)
@@ -320,7 +324,11 @@ def time_shot(
         limiting=limiting,
         runup=up.report,
         runout=out.report,
-        warnings=warnings + up.warnings + out.warnings,
+        # the note on gentle ends only where the take's own ends are the fast ones
+        warnings=[w for w in warnings
+                  if w not in edge_note or "fast" in (up.report.get("edges"),
+                                                      out.report.get("edges"))]
+        + up.warnings + out.warnings,
         fps=fps,
         ticks_per_frame=ticks or None,
     )
@@ -366,6 +374,7 @@ class _RealTime:
     max_speed: float
     edges: str
     gentle_need: float
+    gentle_problem: str  # why gentle ends do not fit the take's speed ("" when they do)
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
@@ -381,16 +390,36 @@ class _RealTime:
         shot_need = grid.slowdown(limits)
         limiting = grid.violations(limits, frames)
         need = gentle_need = fit.factor(shot_need, precision)
+        gentle_problem = ""
         if edges == "gentle" and need > shot_need * (1.0 + LIMIT_RTOL):
-            # Gentle ends are worth no slower take: where they would force one, the ends
-            # use the full limits (the take a crew can shoot comes first).
+            # Gentle ends are worth a little speed, not a take that cannot run at real
+            # time: beyond that the ends use the full limits (:func:`ends_to_use`).
             fast = _EdgeFit.of(path, grid.stream, limits, "fast", start, frames)
             fast_need = fast.factor(shot_need, precision)
-            if fast_need < need * (1.0 - LIMIT_RTOL):
+            if ends_to_use(need, fast_need) == "fast":
+                problem = fit.problem(fast_need)  # the gentle ends at the take's speed
+                gentle_problem = problem.text if problem is not None else ""
                 fit, need, edges = fast, fast_need, "fast"
         max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
-        return (cls(path, ticks, limiting, fit, shot_need, need, max_speed, edges, gentle_need),
-                grid if keep else None)
+        return (cls(path, ticks, limiting, fit, shot_need, need, max_speed, edges, gentle_need,
+                    gentle_problem), grid if keep else None)
+
+
+GENTLE_COST = 0.01
+"""The share of the take's speed gentle run-ups and run-outs may cost before the ends use
+the full limits instead."""
+
+
+def ends_to_use(gentle_need: float, fast_need: float) -> str:
+    """``"gentle"`` or ``"fast"`` ends, from the slow-downs the take needs with each: fast
+    where gentle ends would stop a take that fast ends let run at real time, or would cost
+    more than :data:`GENTLE_COST` of its speed; gentle otherwise (a rig that settles into
+    and out of the move is worth a hundredth of a take's speed)."""
+    if not math.isfinite(gentle_need):
+        return "fast" if math.isfinite(fast_need) else "gentle"
+    if fast_need <= 1.0 + LIMIT_RTOL < gentle_need:
+        return "fast"
+    return "fast" if fast_need < gentle_need * (1.0 - GENTLE_COST) else "gentle"
 
 
 def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
@@ -604,6 +633,24 @@ def _edge_use(edge: Edge, limits: Limits) -> dict[str, dict[str, float]]:
     return out
 
 
+def _edges_as_asked(shot: Samples, limits: Limits, asked: str, fallback: str,
+                    start: Array | None, step: float, frames: IntArray) -> tuple[Edge, Edge]:
+    """The run-up and run-out as asked (``asked``) where they fit the take as it is timed,
+    else with ``fallback`` ends: the maximum feasible speed may need the full limits while
+    the take, running slower, has room to settle gently."""
+    if asked != fallback:
+        peaks = Peaks.of(shot)
+        lim = edge_limits(limits, peaks.qdd, peaks.qddd, asked)
+        ends = ((shot.q[0], shot.qd[0], shot.qdd[0]), (shot.q[-1], shot.qd[-1], shot.qdd[-1]))
+        span = (int(frames[0]), int(frames[-1]))
+        if edge_problem(*ends, lim, span, start) is None:  # velocity and room, as planned
+            try:
+                return _build_edges(shot, limits, asked, start, step, frames)
+            except TimingLimitError:
+                pass
+    return _build_edges(shot, limits, fallback, start, step, frames)
+
+
 def _build_edges(shot: Samples, limits: Limits, edges: str, start: Array | None, step: float,
                  frames: IntArray) -> tuple[Edge, Edge]:
     """The run-up into the shot's first sample and the run-out from its last, on a servo
@@ -649,7 +696,7 @@ def _shot_mode_error(
 
 def _scale(
     path: FramePath, dt: float, rate: float, limits: Limits, factor: float, fit: _EdgeFit,
-    start: Array | None, floor: float = 1.0,
+    start: Array | None, floor: float = 1.0, asked: str = "gentle",
 ) -> tuple[float, int, Samples, Array, Edge, Edge]:
     """Slow the move uniformly by the smallest factor >= ``floor`` (1: never faster than
     the shot) at which the shot and its run-up and run-out fit; resampled, and the edges
@@ -674,8 +721,8 @@ def _scale(
             del grid  # before the next one is made
             continue
         try:
-            up, out = _build_edges(grid.stream, limits, fit.edges, start, s * dt / ticks,
-                                   frames)
+            up, out = _edges_as_asked(grid.stream, limits, asked, fit.edges, start,
+                                      s * dt / ticks, frames)
         except TimingLimitError as exc:
             if s >= MAX_SCALE:
                 raise TimingLimitError(fit.no_room(), max_speed=0.0, feasible_fps=0.0,
