@@ -32,6 +32,8 @@ EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
 def _fail(exc: CamtrajError) -> NoReturn:
     click.echo(f"ERROR: {exc}", err=True)
+    for note in getattr(exc, "__notes__", []):
+        click.echo(f"note: {note}", err=True)
     sys.exit(exc.exit_code)
 
 
@@ -434,6 +436,7 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
              "ratio": v.ratio, "frames": v.frame_text, "text": v.describe()}
             for v in exc.violations
         ],
+        "notes": list(getattr(exc, "__notes__", [])),
     }
 
 
@@ -496,6 +499,7 @@ def _report(r: dict[str, Any]) -> str:
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
+        lines += [f"  note: {note}" for note in r.get("notes", [])]
         message, either = r["message"], "--timing scale does not fit it either: "
         if not r["violations"]:
             lines.append(f"  {message}")

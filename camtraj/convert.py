@@ -30,7 +30,7 @@ from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
 from camtraj.set_file import SetFile
-from camtraj.timing import Limits, time_shot
+from camtraj.timing import Limits, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
@@ -113,6 +113,38 @@ def camera_holds(targets: Array) -> NDArray[np.bool_]:
     return held
 
 
+CUT_RATIO = 8.0
+"""A camera step this many times the largest of the steps around it is a jump (a cut)."""
+CUT_MIN_M, CUT_MIN_RAD = 0.05, math.radians(5.0)
+"""Steps smaller than these are never called a cut."""
+
+
+def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> list[str]:
+    """Where the camera jumps between two frames (a cut left in the shot): a translation or
+    rotation step :data:`CUT_RATIO` times the largest step within ``around`` frames of it,
+    and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per jump."""
+    n = targets.shape[0]
+    if n < 3:
+        return []
+    move = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
+    rel = np.einsum("kji,kjl->kil", targets[:-1, :3, :3], targets[1:, :3, :3])
+    turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+    out = []
+    for k in range(n - 1):
+        lo, hi = max(0, k - around), min(n - 1, k + around + 1)
+        for step, floor, text in ((move, CUT_MIN_M, f"{move[k]:.3f} m"),
+                                  (turn, CUT_MIN_RAD, f"{math.degrees(turn[k]):.1f} deg")):
+            others = np.concatenate([step[lo:k], step[k + 1:hi]])
+            near = float(others.max()) if others.size else 0.0
+            if step[k] > floor and step[k] > CUT_RATIO * near:
+                ratio = (f"{step[k] / near:.0f}x the steps around it" if near > 1e-6 * floor
+                         else "the camera holds still around it")
+                out.append(f"the camera jumps {text} between frames {int(frames[k])} and "
+                           f"{int(frames[k + 1])} ({ratio}): a cut in the shot? split it there")
+                break
+    return out
+
+
 @contextmanager
 def _stage(timings: dict[str, float], name: str) -> Iterator[None]:
     t0 = time.perf_counter()
@@ -172,11 +204,20 @@ def analyse(
             limits = limits.joined(robot.lens.limits())
             if start is not None:  # the lens motors start where the first frame needs them
                 start = np.concatenate([start, analysis.lens_q[0]])
-        analysis.take = time_shot(
-            q_frames, shot.times, limits, mode=options.timing,
-            rate=options.rate, frame_numbers=shot.frames, start=start,
-            hold=camera_holds(targets), edges=options.edges,
-        )
+        try:
+            analysis.take = time_shot(
+                q_frames, shot.times, limits, mode=options.timing,
+                rate=options.rate, frame_numbers=shot.frames, start=start,
+                hold=camera_holds(targets), edges=options.edges,
+            )
+        except TimingLimitError as exc:
+            # a jump between frames (a cut in the shot, or a flip) smears over the frames
+            # around it as the spline's jerk: say where it is
+            cuts = camera_cuts(targets, shot.frames)
+            jump = step_warning(robot, analysis.path, shot.frames, 1.0 / shot.fps)
+            for note in cuts or ([jump] if jump else []):
+                exc.add_note(note)
+            raise
     set_file = SetFile.read(options.set_file) if options.set_file is not None else None
     if set_file is not None and set_file.prims:
         from camtraj.collision import NEAR, check_take

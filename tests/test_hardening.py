@@ -32,6 +32,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom
 
@@ -561,6 +562,51 @@ def test_the_shortest_moves_convert(tmp_path: Path, frames: int) -> None:
     data = json.loads(summary.read_text(), parse_constant=_no_constant)
     assert data["frames"]["count"] == frames
     assert out.stat().st_size > 0
+
+
+def test_a_cut_left_in_the_shot_is_named_where_the_limits_fail(tmp_path: Path) -> None:
+    """A camera that jumps 6 m between two frames (a cut left in the shot) fails on limits
+    over many frames around it; check, check --json and convert say where the jump is."""
+    stage = _stage(tmp_path / "cut.usda")
+    cam = UsdGeom.Camera.Define(stage, "/rig/cam")
+    translate = cam.AddTranslateOp()
+    cam.AddRotateXYZOp().Set(Gf.Vec3f(90.0, 0.0, -90.0))  # looks down +x, the track
+    for frame, x in ((1, 3.0), (11, 3.0), (12, 9.0), (24, 9.0)):  # 3 m, then 9 m from 12
+        translate.Set(Gf.Vec3d(x, 0.0, 1.4), frame)
+    stage.GetRootLayer().Save()
+    note = ("the camera jumps 6.000 m between frames 11 and 12 (the camera holds still "
+            "around it): a cut in the shot? split it there")
+    check = run_cli("check", tmp_path / "cut.usda")
+    assert check.returncode == 3, check.stderr
+    assert f"  note: {note}" in check.stdout.splitlines(), check.stdout
+    data = json.loads(run_cli("check", tmp_path / "cut.usda", "--json").stdout)
+    assert data["notes"] == [note]
+    out = tmp_path / "cut.mcap"
+    conv = run_cli("convert", tmp_path / "cut.usda", "-o", out)
+    assert conv.returncode == 3 and not out.exists()
+    assert conv.stderr.splitlines()[-1] == f"note: {note}", conv.stderr
+
+
+def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
+    """90 deg of pan over 6 frames (eased) is a move; 180 deg in one frame between still
+    frames is a jump, named in degrees."""
+    from camtraj.convert import camera_cuts
+
+    def poses(pan_deg: np.ndarray) -> np.ndarray:
+        a = np.radians(pan_deg)
+        out = np.tile(np.eye(4), (a.size, 1, 1))
+        out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = (
+            np.cos(a), -np.sin(a), np.sin(a), np.cos(a))
+        out[:, :3, 3] = (4.0, 0.0, 1.2)
+        return out
+
+    frames = np.arange(1, 25)
+    u = np.clip((frames - 10) / 6.0, 0.0, 1.0)
+    assert camera_cuts(poses(90.0 * (0.5 - 0.5 * np.cos(np.pi * u))), frames) == []
+    snap = np.where(frames <= 12, 0.0, 180.0)
+    assert camera_cuts(poses(snap), frames) == [
+        "the camera jumps 180.0 deg between frames 12 and 13 (the camera holds still around "
+        "it): a cut in the shot? split it there"]
 
 
 def _no_constant(name: str) -> None:
