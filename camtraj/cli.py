@@ -37,6 +37,13 @@ def _fail(exc: CamtrajError) -> NoReturn:
     sys.exit(exc.exit_code)
 
 
+def _suffix_note(label: str, path: str, suffix: str, kind: str) -> None:
+    """A warning when an output's name does not say what it will be."""
+    if os.path.splitext(path)[1].lower() != suffix:
+        logging.getLogger("camtraj").warning(
+            "%s %s does not end in %s; it will be %s all the same", label, path, suffix, kind)
+
+
 def _progress_wanted(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
@@ -228,9 +235,9 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
     servo rate inside the axis limits, with a run-up from rest and a run-out to rest, and
     written as ROS 2 messages that Foxglove and ros2 bag tools read.
     """
-    if os.path.splitext(output)[1].lower() != ".mcap":  # held: shown only if the run succeeds
-        logging.getLogger("camtraj").warning(
-            "-o %s does not end in .mcap; it will be an MCAP file all the same", output)
+    _suffix_note("-o", output, ".mcap", "an MCAP file")  # held: shown if the run succeeds
+    if report is not None:
+        _suffix_note("--report", report, ".html", "an HTML page")
     progress = _progress(shot, _progress_wanted(quiet))
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from camtraj.convert import convert as run
@@ -265,6 +272,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
     Reports reachability per frame, each axis's use of its limits, the maximum feasible speed,
     and the run-up / run-out extents. Exit code 3 when the shot cannot be done as asked.
     """
+    if report is not None:
+        _suffix_note("--report", report, ".html", "an HTML page")
     progress = _progress(shot, _progress_wanted(quiet or as_json))
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from camtraj.convert import convert as run
@@ -340,6 +349,7 @@ def report_command(mcap_file: str, output: str) -> None:
     the summary, every axis's use of its limits over take time, and top and side views."""
     from camtraj.report import report_mcap
 
+    _suffix_note("-o", output, ".html", "an HTML page")
     try:
         report_mcap(mcap_file, output)
     except CamtrajError as exc:
@@ -372,7 +382,8 @@ def _limits_used(d: dict[str, Any]) -> list[str]:
             u = use.get(name, {})
             conv = math.degrees if revolute else float
             unit = "deg" if revolute else "m"
-            lo, hi = (conv(v) for v in ranges.get(name, (math.nan, math.nan)))
+            # rounded, then + 0.0: a value that rounds to zero shows 0.000, not -0.000
+            lo, hi = (round(conv(v), 3) + 0.0 for v in ranges.get(name, (math.nan, math.nan)))
             lines.append(
                 f"  {name:<8} {_pct(u.get('position', math.nan))}    "
                 f"{_pct(u.get('velocity', math.nan))}   {_pct(u.get('acceleration', math.nan))}"

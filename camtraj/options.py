@@ -172,7 +172,8 @@ def convert_options(func: F) -> F:
             help="Where the robot base stands in the stage: x,y,z [m] and yaw about up [deg] "
             "(default: at the stage origin).",
         ),
-        click.option("--frames", metavar="A:B", help="Film frame range to convert (inclusive)."),
+        click.option("--frames", metavar="A:B",
+                     help="Film frame range of the shot to use (inclusive)."),
         click.option(
             "--rate",
             type=click.FloatRange(min=0.0, min_open=True),

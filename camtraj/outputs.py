@@ -186,6 +186,9 @@ class OutputSet:
                 regular file, or it is another output of this set.
         """
         given = os.fsdecode(path)
+        if not given:  # realpath('') is the working folder
+            msg = f"cannot write {label or 'the output'}: the file name is empty"
+            raise InputError(msg)
         out = _Output(given, label, Path(os.path.realpath(given)))
         if not out.target.name:
             msg = f"cannot write {out.what}: not a file name"

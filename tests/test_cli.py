@@ -466,3 +466,16 @@ def test_the_top_level_help_names_every_command() -> None:
     for name in cli_main.commands:
         assert re.search(rf"^\s+camtraj (\w+ / )*{name}\b", summary, re.MULTILINE), name
     assert re.search(r"camtraj place \S+\.usd \S+\.usd", summary), summary
+
+
+def test_an_output_named_for_another_format_is_warned(tmp_path: Path) -> None:
+    """`--report x.pdf` and `report -o x.pdf` write HTML: said, as for a non-.mcap `-o`."""
+    mcap, page = tmp_path / "whip.mcap", tmp_path / "whip.pdf"
+    conv = run_cli("convert", WHIP, "--timing", "scale", "-o", mcap, "--report", page)
+    assert conv.returncode == 0, conv.stderr
+    assert (f"--report {page} does not end in .html; it will be an HTML page all the same"
+            in conv.stderr), conv.stderr
+    again = run_cli("report", mcap, "-o", tmp_path / "again.pdf")
+    assert again.returncode == 0, again.stderr
+    assert "does not end in .html" in again.stderr
+    assert page.read_text(encoding="utf-8").lstrip().lower().startswith("<!doctype html")

@@ -265,6 +265,9 @@ def _corpus(base: Path) -> tuple[dict[str, Case], Path]:
     add("summary_device_checked_before_the_solve",
         ["convert", SHOTS / "unreachable.usda", "-o", "out.mcap", "--summary", "/dev/full"],
         "character device")
+    add("o_empty", ["convert", good, "-o", ""], "-o: the file name is empty")
+    add("summary_empty", ["convert", good, "-o", "out.mcap", "--summary", ""],
+        "--summary: the file name is empty")
     convert("whip_pan_shot_timing", SHOTS / "whip_pan.usda", "--timing", "shot",
             must=("velocity|acceleration|jerk",), codes=(3,))
     convert("unreachable_sample", SHOTS / "unreachable.usda", must=("cannot be reached",),

@@ -169,6 +169,19 @@ def test_shot_sinusoid_matches_analytic_derivatives(limits: Limits) -> None:
     assert rep.limiting == []
 
 
+def test_a_servo_rate_far_from_the_one_asked_is_said(limits: Limits) -> None:
+    """Every film frame is a tick: 250 Hz at 24 fps is 240 Hz (said nowhere, the README
+    gives it), 10 Hz is 24 Hz (said)."""
+    amp = np.array([0.3, 0.3, 0.2, 0.2, 0.3, 0.4, 0.4, 0.4])
+    t, q = sinusoid(49, amp, 2 * np.pi * 0.4)
+    near = time_shot(q, t, limits, rate=250.0)
+    assert not any("servo rate" in w for w in near.report.warnings)
+    far = time_shot(q, t, limits, rate=10.0)
+    assert far.rate == pytest.approx(24.0)
+    assert ("servo rate 24 Hz, not the 10 Hz asked: every film frame is a servo tick, so the "
+            "rate is a whole number of ticks per frame interval") in far.report.warnings
+
+
 def test_finite_differences_agree_with_reported_derivatives(limits: Limits) -> None:
     amp = np.array([0.3, 0.3, 0.2, 0.2, 0.3, 0.4, 0.4, 0.4])
     t, q = sinusoid(121, amp, 2 * np.pi * 0.4, phase=0.7)  # starts and ends in motion

@@ -306,6 +306,10 @@ def time_shot(
         t = np.arange(m) * step
         eff_rate = shot_rate
         uniform = True
+        if abs(eff_rate - rate) > RATE_NOTE * rate:
+            warnings.append(
+                f"servo rate {eff_rate:.4g} Hz, not the {rate:.4g} Hz asked: every film frame "
+                "is a servo tick, so the rate is a whole number of ticks per frame interval")
     # Run-up, shot and run-out joined a quantity at a time, each of the shot's dropped once
     # joined: the shot's samples and the take's are never both whole in memory.
     columns = [shot.q, shot.qd, shot.qdd, shot.qddd]
@@ -404,6 +408,10 @@ class _RealTime:
         return (cls(path, ticks, limiting, fit, shot_need, need, max_speed, edges, gentle_need,
                     gentle_problem), grid if keep else None)
 
+
+RATE_NOTE = 0.05
+"""A servo rate this far (relative) from the one asked is said (250 -> 240 Hz at 24 fps is
+not)."""
 
 GENTLE_COST = 0.01
 """The share of the take's speed gentle run-ups and run-outs may cost before the ends use
