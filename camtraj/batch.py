@@ -61,6 +61,7 @@ from camtraj.outputs import (
     refuse_overlaps,
     remove_stale_temps,
 )
+from camtraj.shown import speed_percent
 
 __all__ = [
     "REPORT_NAME",
@@ -322,10 +323,11 @@ def _format_frames(frames: Any) -> str:
 
 
 def _format_speed(speed: Any) -> str:
+    """The maximum feasible speed as convert and check show it: '390%' of real time."""
     if speed is None:
         return "-"
     if isinstance(speed, int | float):
-        return f"{speed:.3g}x" if math.isfinite(speed) else "-"
+        return speed_percent(float(speed)) if math.isfinite(speed) else "-"
     return str(speed)
 
 

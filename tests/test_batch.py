@@ -145,6 +145,10 @@ def test_touched_shot_robot_file_and_force_reconvert(tmp_path: Path) -> None:
     faster = dataclasses.replace(options, rate=500.0)
     report = run_batch([str(shot)], out, jobs=1, options=faster)
     assert [r.status for r in report.results] == ["ok"]  # other options: not up to date
+    # the speed as convert and check say it: % of real time, rounded down
+    speed = report.results[0].summary["max_speed"]
+    row = report.table().splitlines()[1]
+    assert f"  {math.floor(100 * speed)}%  " in row and "x " not in row, row
     assert statuses() == ["ok"]  # and back
     mcap = out / "dolly.mcap"
     for path in (shot, robot):
