@@ -1029,7 +1029,12 @@ def _open_for_reading(path: Path) -> IO[bytes]:
         msg = f"cannot read {path}: {_reason(exc)}"
         raise InputError(msg) from exc
     if head != _MCAP_MAGIC:
+        start = stream.read(1 << 16) if head.startswith(b"#usda") else b""
         stream.close()
+        if b'"camtraj_rig"' in start:  # convert --usd's own output (camtraj.usd_rig)
+            msg = (f"{path} is camtraj's USD rig layer (convert --usd), not an MCAP: the take "
+                   "is in the MCAP written with it")
+            raise InputError(msg)
         kind = next((k for m, k in _USD_MAGICS.items() if head.startswith(m)), None)
         if kind is None and head.startswith(b"PK") and path.suffix.lower() == ".usdz":
             kind = "USD package (usdz)"

@@ -346,3 +346,12 @@ def test_rig_camera_carries_the_lens_shift_camera_info_carries(
         cx = info.width / 2 - gf.horizontalApertureOffset / tenths / h_mm * info.width
         cy = info.height / 2 + gf.verticalApertureOffset / tenths / v_mm * info.height
         assert (info.k[2], info.k[5]) == pytest.approx((cx, cy), abs=1e-6)
+
+
+def test_info_on_a_rig_layer_says_what_it_is(converted: dict[str, Converted]) -> None:
+    """A rig layer given to a command that reads MCAP files is named as camtraj's own output
+    (it used to be told to convert it, as if it were a shot)."""
+    rig = converted["zup_m"].rig
+    with pytest.raises(InputError, match=r"is camtraj's USD rig layer \(convert --usd\), "
+                                         r"not an MCAP: the take is in the MCAP written"):
+        read_take(rig)
