@@ -463,7 +463,7 @@ def summary(
         "robot": analysis.robot.name,
         "placement": analysis.placement.describe(),
         "timing": take.mode,
-        "edges": take.report.runup.get("edges", options.edges),  # gentle, unless it costs speed
+        "edges": take.report.runup.get("edges", options.edges),  # as built: gentle where it fits
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": round(float(take.rate), 9),  # 250.0, not 249.99999999999977
         # an optimal retime cuts each frame interval into its own equal steps: they vary
