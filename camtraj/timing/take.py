@@ -217,16 +217,17 @@ def time_shot(
     # the real-time grid is kept only where it is the take's stream
     real, grid = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames,
                               keep=mode == "shot")
-    asked = edges  # gentle ends are kept wherever they fit the speed the take runs at
-    edge_note = []
+    # the ends asked for are built wherever they fit the speed the take runs at, else those
+    # the maximum feasible speed needs (the full limits)
+    ends = tuple(dict.fromkeys((edges, real.edges)))
+    edge_note = ""
     if real.edges != edges:
         ratio = real.gentle_need / real.need
         cost = (f"a {ratio:.2f}x slower take" if ratio >= 1.1 else f"a {ratio:.4f}x slower take"
                 ) if math.isfinite(ratio) else "more room than the limits leave"
         why = f" ({real.gentle_problem})" if real.gentle_problem else ""
-        edge_note.append(f"a gentle run-up/run-out would need {cost}{why}: the ends use the "
-                         "full acceleration and jerk limits (as --edges fast)")
-        edges = real.edges
+        edge_note = (f"a gentle run-up/run-out would need {cost}{why}: the ends use the "
+                     "full acceleration and jerk limits (as --edges fast)")
     path, fit, need, max_speed = real.path, real.fit, real.need, real.max_speed
     ticks0, limiting = real.ticks, real.limiting
     position_bad = [v for v in limiting if v.quantity == "position"]
@@ -234,9 +235,9 @@ def time_shot(
         raise shot_error(limiting if mode == "shot" else position_bad, max_speed, fps)
 
     def scaled(floor: float = 1.0) -> tuple[float, int, Samples, Array, Edge, Edge]:
-        return _scale(path, dt, rate, limits, need, fit, start_q, floor, asked)
+        return _scale(path, dt, rate, limits, need, fit, start_q, ends, floor)
 
-    warnings: list[str] = list(edge_note)
+    warnings: list[str] = []
     if mode == "shot":
         problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
         if limiting or problem is not None:
@@ -248,8 +249,7 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         try:
-            up, out = _edges_as_asked(shot, limits, asked, edges, start_q, 1.0 / shot_rate,
-                                      frames)
+            up, out = _build_edges(shot, limits, ends, start_q, 1.0 / shot_rate, frames)
         except TimingLimitError as exc:  # a grid effect at the margin: say what scale does
             raise _shot_mode_error([], None, max_speed, fps, scaled, str(exc)) from None
     elif mode == "scale":
@@ -281,7 +281,7 @@ def time_shot(
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
             ticks = 0  # samples per frame vary
             shot_rate = 0.0
-            up, out = _edges_as_asked(shot, limits, asked, edges, start_q, 1.0 / rate, frames)
+            up, out = _build_edges(shot, limits, ends, start_q, 1.0 / rate, frames)
 
     # Position limits of the shot part as sampled in the take.
     pos_bad = [v for v in violations(shot, limits, FrameMap.of(shot_x, frames), LIMIT_RTOL)
@@ -320,6 +320,8 @@ def time_shot(
     frame_samples = (n_up + frame_idx).astype(np.int64)
     frame_times_take = t[frame_samples]
 
+    if edge_note and up.report["edges"] != edges:  # the take's own ends are the fast ones
+        warnings.insert(0, edge_note)
     report = TimingReport(
         peak_use=use,
         position_range=position_range,
@@ -328,11 +330,7 @@ def time_shot(
         limiting=limiting,
         runup=up.report,
         runout=out.report,
-        # the note on gentle ends only where the take's own ends are the fast ones
-        warnings=[w for w in warnings
-                  if w not in edge_note or "fast" in (up.report.get("edges"),
-                                                      out.report.get("edges"))]
-        + up.warnings + out.warnings,
+        warnings=warnings + up.warnings + out.warnings,
         fps=fps,
         ticks_per_frame=ticks or None,
     )
@@ -641,39 +639,38 @@ def _edge_use(edge: Edge, limits: Limits) -> dict[str, dict[str, float]]:
     return out
 
 
-def _edges_as_asked(shot: Samples, limits: Limits, asked: str, fallback: str,
-                    start: Array | None, step: float, frames: IntArray) -> tuple[Edge, Edge]:
-    """The run-up and run-out as asked (``asked``) where they fit the take as it is timed,
-    else with ``fallback`` ends: the maximum feasible speed may need the full limits while
-    the take, running slower, has room to settle gently."""
-    if asked != fallback:
-        peaks = Peaks.of(shot)
-        lim = edge_limits(limits, peaks.qdd, peaks.qddd, asked)
-        ends = ((shot.q[0], shot.qd[0], shot.qdd[0]), (shot.q[-1], shot.qd[-1], shot.qdd[-1]))
-        span = (int(frames[0]), int(frames[-1]))
-        if edge_problem(*ends, lim, span, start) is None:  # velocity and room, as planned
-            try:
-                return _build_edges(shot, limits, asked, start, step, frames)
-            except TimingLimitError:
-                pass
-    return _build_edges(shot, limits, fallback, start, step, frames)
-
-
-def _build_edges(shot: Samples, limits: Limits, edges: str, start: Array | None, step: float,
-                 frames: IntArray) -> tuple[Edge, Edge]:
+def _build_edges(shot: Samples, limits: Limits, edges: tuple[str, ...], start: Array | None,
+                 step: float, frames: IntArray) -> tuple[Edge, Edge]:
     """The run-up into the shot's first sample and the run-out from its last, on a servo
-    grid of ``step``; gentle edges within the shot's own peak acceleration and jerk."""
+    grid of ``step``, with the first of ``edges`` (``"gentle"``: within the shot's own peak
+    acceleration and jerk; ``"fast"``: the full limits) whose velocity and room fit the take
+    as it is timed: the maximum feasible speed may need the full limits while the take,
+    running slower, has room to settle gently. The last is built whatever the check says
+    (it raises where it does not fit)."""
     peaks = Peaks.of(shot)
-    lim = edge_limits(limits, peaks.qdd, peaks.qddd, edges)
-    if start is None:
-        up = runup(shot.q[0], shot.qd[0], shot.qdd[0], lim, step, int(frames[0]))
-    else:
-        up = runup_from(start, shot.q[0], shot.qd[0], shot.qdd[0], lim, step, int(frames[0]))
-    out = runout(shot.q[-1], shot.qd[-1], shot.qdd[-1], lim, step, int(frames[-1]))
-    for edge in (up, out):
-        edge.report["peak_use"] = _edge_use(edge, limits)
-        edge.report["edges"] = edges
-    return up, out
+    first, last = (shot.q[0], shot.qd[0], shot.qdd[0]), (shot.q[-1], shot.qd[-1], shot.qdd[-1])
+    span = (int(frames[0]), int(frames[-1]))
+    for k, mode in enumerate(edges):
+        lim = edge_limits(limits, peaks.qdd, peaks.qddd, mode)
+        final = k == len(edges) - 1
+        if not final and edge_problem(first, last, lim, span, start) is not None:
+            continue
+        try:
+            if start is None:
+                up = runup(*first, lim, step, span[0])
+            else:
+                up = runup_from(start, *first, lim, step, span[0])
+            out = runout(*last, lim, step, span[1])
+        except TimingLimitError:
+            if final:
+                raise
+            continue
+        for edge in (up, out):
+            edge.report["peak_use"] = _edge_use(edge, limits)
+            edge.report["edges"] = mode
+        return up, out
+    msg = "internal error: no edges to build"  # pragma: no cover - edges is never empty
+    raise RuntimeError(msg)  # pragma: no cover
 
 
 def _shot_mode_error(
@@ -704,7 +701,7 @@ def _shot_mode_error(
 
 def _scale(
     path: FramePath, dt: float, rate: float, limits: Limits, factor: float, fit: _EdgeFit,
-    start: Array | None, floor: float = 1.0, asked: str = "gentle",
+    start: Array | None, ends: tuple[str, ...], floor: float = 1.0,
 ) -> tuple[float, int, Samples, Array, Edge, Edge]:
     """Slow the move uniformly by the smallest factor >= ``floor`` (1: never faster than
     the shot) at which the shot and its run-up and run-out fit; resampled, and the edges
@@ -713,7 +710,8 @@ def _scale(
     ``factor`` is where the real-time check and the edge planning say everything fits. The
     take's grid has other sample points (ticks per frame change with the factor), so the
     factor is raised if a resampled sample still exceeds a limit or an edge built from the
-    resampled stream (whose peaks bound gentle edges) still lacks room.
+    resampled stream (whose peaks bound gentle edges) still lacks room. ``ends``: the kinds
+    of run-up and run-out to build, in order of preference (:func:`_build_edges`).
     """
     if not math.isfinite(factor):
         msg = fit.no_room()
@@ -729,8 +727,7 @@ def _scale(
             del grid  # before the next one is made
             continue
         try:
-            up, out = _edges_as_asked(grid.stream, limits, asked, fit.edges, start,
-                                      s * dt / ticks, frames)
+            up, out = _build_edges(grid.stream, limits, ends, start, s * dt / ticks, frames)
         except TimingLimitError as exc:
             if s >= MAX_SCALE:
                 raise TimingLimitError(fit.no_room(), max_speed=0.0, feasible_fps=0.0,
