@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
-from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, margin_peak, powers
+from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, TakeUse, margin_peak, powers
 from camtraj.ik.spline_ops import BandOps
 from camtraj.robot import Robot
 
@@ -159,17 +159,18 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
     from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_STAGES`): the curves
     and the damping reached."""
-    targets3 = np.concatenate([targets] * 3)
-    b3 = np.tile(branch, 3)
-    j = cost.refine_total(y)
+    targets2 = np.concatenate([targets] * 2)
+    b2 = np.tile(branch, 2)
+    use = cost.take_use(y[:, :8])
+    j = cost.refine_total(y, use)
     slow = 0  # consecutive rounds that lowered the objective by less than the tolerance
     for _ in range(rounds):
-        grad_y = _jacobian(robot, targets3, b3, x, y)
-        H, g, w, c = _normal_equations(cost, y, grad_y, floor)
+        grad_y = _jacobian(robot, targets2, b2, x, y)
+        H, g, w, c = _normal_equations(cost, y, grad_y, floor, use)
         improved = False
         for _try in range(10):
             step = _solve_rank1(H, g, mu, w, c)
-            xn, yn, jn = _try_step(robot, cost, corridor, targets, branch, x, y, step)
+            xn, yn, jn, un = _try_step(robot, cost, corridor, targets, branch, x, y, step)
             if jn < j:
                 improved = True
                 # The model's curvature is an upper bound (the power mean's concave outer
@@ -183,13 +184,13 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
                     curve = (jn - j - t * slope) / (t * t)
                     far = -slope / (2.0 * curve) if curve > 0.0 else math.inf
                     t_next = min(max(far, 2.0 * t), 16.0 * t)
-                    xg, yg, jg = _try_step(robot, cost, corridor, targets, branch, x, y,
-                                           t_next * step)
+                    xg, yg, jg, ug = _try_step(robot, cost, corridor, targets, branch, x, y,
+                                               t_next * step)
                     if not jg < jn:
                         break
-                    xn, yn, jn, t = xg, yg, jg, t_next
+                    xn, yn, jn, un, t = xg, yg, jg, ug, t_next
                 rel = (j - jn) / max(abs(j), 1e-300)
-                x, y, j = xn, yn, jn
+                x, y, j, use = xn, yn, jn, un
                 mu = max(mu / 4.0, 1e-9)
                 break
             mu *= 8.0
@@ -202,15 +203,18 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
 
 
 def _try_step(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
-              branch: IntArray, x: Array, y: Array, step: Array) -> tuple[Array, Array, float]:
+              branch: IntArray, x: Array, y: Array,
+              step: Array) -> tuple[Array, Array, float, TakeUse]:
     """The curves after a step, projected into the corridor; a frame the closed form cannot
-    solve there (or only by folding a turn) keeps its values. Returns x, y and the objective."""
+    solve there (or only by folding a turn) keeps its values. Returns x, y, the objective
+    and the take's use of the limits (the next round's normal equations reuse it)."""
     xn = corridor.project(x + step)
     yn, keep = branch_measures(robot, targets, xn[:, 0], xn[:, 1], y[:, :8], branch)
     keep &= ~_folded(yn, y)
     xn = np.where(keep[:, None], xn, x)
     yn = np.where(keep[:, None], yn, y)
-    return xn, yn, cost.refine_total(yn)
+    use = cost.take_use(yn[:, :8])
+    return xn, yn, cost.refine_total(yn, use), use
 
 
 def _folded(ya: Array, yb: Array) -> NDArray[np.bool_]:
@@ -220,32 +224,32 @@ def _folded(ya: Array, yb: Array) -> NDArray[np.bool_]:
     return np.asarray((np.abs(ya[:, :8] - yb[:, :8]) > 0.5 * np.pi).any(axis=1))
 
 
-def _jacobian(robot: Robot, targets3: Array, b3: IntArray, x: Array, y: Array) -> Array:
+def _jacobian(robot: Robot, targets2: Array, b2: IntArray, x: Array, y: Array) -> Array:
     """d measures / d (track, extend) per frame (n, 10, 2), by one-sided differences of the
-    closed form (all frames in one call); a side the closed form cannot solve (a corridor
-    edge) is taken backwards."""
+    closed form from the measures y at x (both sides' frames in one call; ``targets2`` and
+    ``b2`` are the targets and branches twice); a side the closed form cannot solve (a
+    corridor edge) is taken backwards."""
     n = x.shape[0]
     grad_y = np.zeros((n, N_MEASURES, 2))
     side = np.ones((n, 2))
     for attempt in range(2):
-        pts = np.concatenate([x, x + [_H, 0] * side[:, :1], x + [0, _H] * side[:, 1:]])
-        prev = np.concatenate([y[:, :8]] * 3)
-        ya, oka = branch_measures(robot, targets3, pts[:, 0], pts[:, 1], prev, b3)
-        ys = ya.reshape(3, n, N_MEASURES)
-        oks = oka.reshape(3, n)
+        pts = np.concatenate([x + [_H, 0] * side[:, :1], x + [0, _H] * side[:, 1:]])
+        prev = np.concatenate([y[:, :8]] * 2)
+        ya, oka = branch_measures(robot, targets2, pts[:, 0], pts[:, 1], prev, b2)
+        ys = ya.reshape(2, n, N_MEASURES)
+        good = oka.reshape(2, n) & ~np.stack([_folded(ys[0], y), _folded(ys[1], y)])
         for v in range(2):
-            good = (oks[v + 1] & ~_folded(ys[v + 1], y))[:, None]
-            grad_y[:, :, v] = np.where(good, (ys[v + 1] - y) / (_H * side[:, v:v + 1]),
+            grad_y[:, :, v] = np.where(good[v][:, None], (ys[v] - y) / (_H * side[:, v:v + 1]),
                                        grad_y[:, :, v])
-        bad = ~(oks[1:] & ~np.stack([_folded(ys[1], y), _folded(ys[2], y)])).T  # (n, 2)
+        bad = ~good.T  # (n, 2)
         if not bad.any() or attempt:
             break
         side = np.where(bad, -1.0, side)
     return grad_y
 
 
-def _normal_equations(cost: ShotCost, y: Array, grad_y: Array,
-                      floor: float = 0.0) -> tuple[Array, Array, Array, float]:
+def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.0,
+                      use: TakeUse | None = None) -> tuple[Array, Array, Array, float]:
     """Gauss-Newton normal matrix (n, D, 2, 2) (the 2 x 2 block of frame k with frame k + d),
     gradient, and the rank-one correction (w (n, 2), c: the curvature is H - c w w^T) of
     ``cost.refine_total``.
@@ -257,12 +261,12 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array,
     Gauss-Newton model (the concave outer power dropped: the model overestimates curvature),
     each use's curvature taken at ``max(a, floor)`` (:data:`_STAGES`);
     the L1 motion tie-break through its majorising quadratic; margin hinges through their
-    active sets.
+    active sets. ``use`` is ``cost.take_use`` of y's joints, when already known.
     """
     n = y.shape[0]
     q, G = y[:, :8], grad_y[:, :8, :]
     p, s = cost.power, cost.scale
-    use = cost.take_use(q)
+    use = use or cost.take_use(q)
     ops = use.ops
     width = ops.coef.shape[1]
     pad = width  # frames of padding on either side of the gathered arrays
