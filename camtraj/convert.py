@@ -122,14 +122,15 @@ CUT_MIN_M, CUT_MIN_RAD = 0.05, math.radians(5.0)
 def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> list[str]:
     """Where the camera jumps between two frames (a cut left in the shot): a translation or
     rotation step :data:`CUT_RATIO` times the largest step within ``around`` frames of it,
-    and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per jump."""
+    and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per jump, then one with the
+    ``--frames`` ranges of the parts between the jumps."""
     n = targets.shape[0]
     if n < 3:
         return []
     move = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
     rel = np.einsum("kji,kjl->kil", targets[:-1, :3, :3], targets[1:, :3, :3])
     turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
-    out = []
+    out, after = [], []
     for k in range(n - 1):
         lo, hi = max(0, k - around), min(n - 1, k + around + 1)
         for step, floor, text in ((move, CUT_MIN_M, f"{move[k]:.3f} m"),
@@ -140,8 +141,14 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
                 ratio = (f"{step[k] / near:.0f}x the steps around it" if near > 1e-6 * floor
                          else "the camera holds still around it")
                 out.append(f"the camera jumps {text} between frames {int(frames[k])} and "
-                           f"{int(frames[k + 1])} ({ratio}): a cut in the shot? split it there")
+                           f"{int(frames[k + 1])} ({ratio}): a cut in the shot?")
+                after.append(k)
                 break
+    if after:
+        firsts, lasts = [0, *(k + 1 for k in after)], [*after, n - 1]
+        parts = ", ".join(f"--frames {int(frames[a])}:{int(frames[b])}"
+                          for a, b in zip(firsts, lasts, strict=True))
+        out.append(f"to split the shot there, convert each part on its own: {parts}")
     return out
 
 

@@ -577,17 +577,26 @@ def test_a_cut_left_in_the_shot_is_named_where_the_limits_fail(tmp_path: Path) -
     for frame, x in ((1, 3.0), (11, 3.0), (12, 9.0), (24, 9.0)):  # 3 m, then 9 m from 12
         translate.Set(Gf.Vec3d(x, 0.0, 1.4), frame)
     stage.GetRootLayer().Save()
-    note = ("the camera jumps 6.000 m between frames 11 and 12 (the camera holds still "
-            "around it): a cut in the shot? split it there")
+    notes = ["the camera jumps 6.000 m between frames 11 and 12 (the camera holds still "
+             "around it): a cut in the shot?",
+             "to split the shot there, convert each part on its own: --frames 1:11, "
+             "--frames 12:24"]
     check = run_cli("check", tmp_path / "cut.usda")
     assert check.returncode == 3, check.stderr
-    assert f"  note: {note}" in check.stdout.splitlines(), check.stdout
+    lines = check.stdout.splitlines()
+    at = lines.index(f"  note: {notes[0]}")
+    assert lines[at:at + 2] == [f"  note: {n}" for n in notes], check.stdout
     data = json.loads(run_cli("check", tmp_path / "cut.usda", "--json").stdout)
-    assert data["notes"] == [note]
+    assert data["notes"] == notes
     out = tmp_path / "cut.mcap"
     conv = run_cli("convert", tmp_path / "cut.usda", "-o", out)
     assert conv.returncode == 3 and not out.exists()
-    assert conv.stderr.splitlines()[-1] == f"note: {note}", conv.stderr
+    assert conv.stderr.splitlines()[-2:] == [f"note: {n}" for n in notes], conv.stderr
+    # the parts it names convert on their own
+    for part in ("1:11", "12:24"):
+        piece = tmp_path / f"cut_{part.replace(':', '_')}.mcap"
+        done = run_cli("convert", tmp_path / "cut.usda", "-o", piece, "--frames", part)
+        assert done.returncode == 0 and piece.stat().st_size > 0, done.stderr
 
 
 def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
@@ -609,7 +618,12 @@ def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
     snap = np.where(frames <= 12, 0.0, 180.0)
     assert camera_cuts(poses(snap), frames) == [
         "the camera jumps 180.0 deg between frames 12 and 13 (the camera holds still around "
-        "it): a cut in the shot? split it there"]
+        "it): a cut in the shot?",
+        "to split the shot there, convert each part on its own: --frames 1:12, --frames 13:24"]
+    twice = np.where(frames <= 6, 0.0, np.where(frames <= 18, 180.0, 0.0))
+    assert camera_cuts(poses(twice), frames)[-1] == (
+        "to split the shot there, convert each part on its own: --frames 1:6, --frames 7:18, "
+        "--frames 19:24")
 
 
 def _no_constant(name: str) -> None:
