@@ -194,6 +194,23 @@ def test_duplicate_stems_are_refused_before_starting(tmp_path: Path) -> None:
     assert not out.exists()
 
 
+@pytest.mark.parametrize("option", ["--lens", "--robot", "--set-file"])
+def test_a_bad_shared_file_is_one_error_before_any_shot_runs(tmp_path: Path,
+                                                              option: str) -> None:
+    """A lens, robot or set file every shot reads, broken: one error line naming it, exit 2,
+    nothing written (it failed the same way on every shot, one worker each)."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text("speed = [\n")
+    out = tmp_path / "out"
+    proc = _run("batch", *_sample_args()[:2], "-o", str(out), option, str(bad))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    kind = option.lstrip("-").split("-")[0]
+    assert len(lines) == 1 and lines[0].startswith(f"ERROR: {kind} file {bad}: not valid TOML"), \
+        proc.stderr
+    assert not out.exists()
+
+
 def test_malformed_options_are_input_errors() -> None:
     with pytest.raises(InputError, match="placement"):
         build_options(
