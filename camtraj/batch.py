@@ -488,23 +488,6 @@ def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any
     )
 
 
-def _read_shared_inputs(options: ConvertOptions) -> None:
-    """Read the robot, lens and set files as every shot's convert will: raises the file's
-    typed error (an :class:`InputError`)."""
-    from camtraj.convert import load_robot
-    from camtraj.errors import LensFileError, RobotFileError
-    from camtraj.set_file import SetFile
-
-    for path, what, error in ((options.robot, "robot file", RobotFileError),
-                              (options.lens, "lens file", LensFileError),
-                              (options.set_file, "set file", InputError)):
-        if path is not None:
-            require_regular_file(path, what, error)
-    load_robot(options)
-    if options.set_file is not None:
-        SetFile.read(options.set_file)
-
-
 def run_batch(
     shots: Sequence[str],
     outdir: str | os.PathLike[str],
@@ -561,7 +544,9 @@ def run_batch(
 
     # The files every shot reads (robot, lens, set file) are read once, here: a bad one is
     # one error before anything runs, not the same failure on every shot.
-    _read_shared_inputs(options)
+    from camtraj.convert import read_shared_inputs
+
+    read_shared_inputs(options)
 
     check_can_make(out / REPORT_NAME, "-o")
     make_parent(out / REPORT_NAME, "-o")

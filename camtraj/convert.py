@@ -21,9 +21,15 @@ from numpy.typing import NDArray
 import camtraj
 from camtraj import jsonsafe
 from camtraj.analysis import Analysis, Placement, axis_value, margins_summary
-from camtraj.errors import InfeasibleError, InputError, ShotFileError
+from camtraj.errors import (
+    InfeasibleError,
+    InputError,
+    LensFileError,
+    RobotFileError,
+    ShotFileError,
+)
 from camtraj.ik import PathSolution, solve_path_report
-from camtraj.inputs import require_regular_files, run_inputs
+from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
@@ -87,6 +93,20 @@ def load_robot(options: ConvertOptions) -> Robot:
 
         robot = replace(robot, lens=Lens.from_toml(options.lens))
     return robot
+
+
+def read_shared_inputs(options: ConvertOptions) -> None:
+    """Read the robot, lens and set files of ``options`` as each shot's run will, for the
+    commands that run many shots on them (batch, farm export): a bad one is one error
+    before any shot runs. Raises the file's typed error (an :class:`InputError`)."""
+    for path, what, error in ((options.robot, "robot file", RobotFileError),
+                              (options.lens, "lens file", LensFileError),
+                              (options.set_file, "set file", InputError)):
+        if path is not None:
+            require_regular_file(path, what, error)
+    load_robot(options)
+    if options.set_file is not None:
+        SetFile.read(options.set_file)
 
 
 def load_placement(options: ConvertOptions) -> Placement:

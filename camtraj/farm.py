@@ -180,7 +180,9 @@ def _portable(options: ConvertOptions, spell: _Paths) -> ConvertOptions:
     )
 
 
-def _check_shots(shots: Sequence[str]) -> None:
+def _check_shots(shots: Sequence[str], options: ConvertOptions) -> None:
+    """The shots exist, and the robot, lens and set files every task reads can be read (a
+    bad one would fail every task on the farm)."""
     if not shots:
         msg = "no shots given"
         raise InputError(msg)
@@ -189,6 +191,9 @@ def _check_shots(shots: Sequence[str]) -> None:
         if not Path(shot).is_file():
             msg = f"{one_line(shot)}: no such shot file"
             raise InputError(msg)
+    from camtraj.convert import read_shared_inputs
+
+    read_shared_inputs(options)
 
 
 def _check_job(shots: Sequence[str], outputs: OutputSet, *, outdir: Path,
@@ -426,11 +431,12 @@ def export_openjd(
         The job file path.
 
     Raises:
-        InputError: Missing shot, duplicate stems, missing ``farm`` extra, invalid template.
+        InputError: Missing shot, a robot, lens or set file that cannot be read, duplicate
+            stems, missing ``farm`` extra, invalid template.
     """
     _require("openjd.model", "openjd-model")
     _require("yaml", "PyYAML")
-    _check_shots(shots)
+    _check_shots(shots, options)
     path = Path(job_file)
     out = Path(outdir) if outdir is not None else path.resolve().parent
     with OutputSet() as outputs:
@@ -519,10 +525,11 @@ def export_opencue(
         The spec path and the manifest path.
 
     Raises:
-        InputError: Missing shot, duplicate stems, missing ``farm`` extra.
+        InputError: Missing shot, a robot, lens or set file that cannot be read, duplicate
+            stems, missing ``farm`` extra.
     """
     _require("outline", "opencue-pyoutline")
-    _check_shots(shots)
+    _check_shots(shots, options)
     path = Path(job_file)
     manifest = manifest_path_for(path)
     out = Path(outdir) if outdir is not None else path.resolve().parent

@@ -216,6 +216,21 @@ def test_duplicate_stems_are_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "j.xml").exists()
 
 
+@pytest.mark.parametrize("fmt", ["openjd", "opencue"])
+def test_a_bad_lens_or_robot_file_is_refused_at_export(tmp_path: Path, fmt: str) -> None:
+    """Every task would fail on the farm with the same error: export says it once, writes
+    no job, exits 2."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text("speed = [\n")
+    job = tmp_path / ("job.yaml" if fmt == "openjd" else "job.xml")
+    for option, kind in (("--lens", "lens"), ("--robot", "robot")):
+        proc = _run("farm", "export", "--format", fmt, str(SAMPLES / "whip_pan.usda"),
+                    "-o", str(job), option, str(bad))
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.startswith(f"ERROR: {kind} file {bad}: not valid TOML"), proc.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
 def test_every_convert_option_reaches_the_openjd_task(tmp_path: Path) -> None:
     robot = tmp_path / "robot.toml"
     shutil.copy2(ROOT / "camtraj" / "data" / "robot.toml", robot)
