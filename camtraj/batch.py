@@ -405,15 +405,19 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, stop: Any, signum: int) -> None:
     pool.shutdown(wait=True, cancel_futures=True)  # the stopped shots end quickly
 
 
-_ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-"""Worker environment: one BLAS thread per worker, as the workers already use every core."""
+_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+               "PYTHONSAFEPATH": "1"}
+"""Worker environment: one BLAS thread per worker, as the workers already use every core;
+and no current folder on the fork server's import path (it starts as ``python -c``, which
+puts it first: a folder named ``camtraj`` there, a clone of this repository say, was
+imported instead of the installed package and every worker failed)."""
 
 
 @contextlib.contextmanager
 def _worker_environment() -> Iterator[None]:
-    """Set :data:`_ONE_THREAD` (where the user has not) while worker processes are started."""
-    added = [k for k in _ONE_THREAD if k not in os.environ]
-    os.environ.update({k: _ONE_THREAD[k] for k in added})
+    """Set :data:`_WORKER_ENV` (where the user has not) while worker processes are started."""
+    added = [k for k in _WORKER_ENV if k not in os.environ]
+    os.environ.update({k: _WORKER_ENV[k] for k in added})
     try:
         yield
     finally:

@@ -395,12 +395,10 @@ class _Runner:
                         file=sys.stderr, dynamic_ncols=True, leave=False)
         self.count = 0
         if jobs > 1:
-            from camtraj.batch import _mp_context, _worker_environment
+            from camtraj.batch import _mp_context
 
-            with _worker_environment():
-                self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_mp_context(),
-                                                   initializer=_init_worker,
-                                                   initargs=(problems,))
+            self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=_mp_context(),
+                                               initializer=_init_worker, initargs=(problems,))
 
     def run(self, tasks: list[Task]) -> list[Result]:
         self.bar.total += len(tasks)
@@ -416,7 +414,10 @@ class _Runner:
             return out
         size = max(1, math.ceil(len(tasks) / (4 * self.jobs)))
         chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
-        futures = {self.pool.submit(_evaluate_batch, ch): k for k, ch in enumerate(chunks)}
+        from camtraj.batch import _worker_environment
+
+        with _worker_environment():  # the workers (and their fork server) start on submit
+            futures = {self.pool.submit(_evaluate_batch, ch): k for k, ch in enumerate(chunks)}
         results: list[list[Result]] = [[] for _ in chunks]
         for fut in cf.as_completed(futures):
             results[futures[fut]] = fut.result()

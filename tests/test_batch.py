@@ -211,6 +211,25 @@ def test_a_bad_shared_file_is_one_error_before_any_shot_runs(tmp_path: Path,
     assert not out.exists()
 
 
+def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) -> None:
+    """Run where a folder named camtraj sits (a clone of this repository, an output folder):
+    the workers import the installed package, not that folder (every worker failed, and the
+    batch said it was stopped by SIGINT). The installed command, as a user runs it."""
+    command = Path(sys.executable).parent / "camtraj"
+    assert command.is_file(), "the camtraj command is not installed in this environment"
+    (tmp_path / "camtraj").mkdir()
+    shot = SAMPLES / "blender_crane_up.usda"
+    proc = subprocess.run([str(command), "batch", str(shot), "-o", "out", "--jobs", "2"],
+                          cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "out" / "blender_crane_up.mcap").stat().st_size > 0
+    proc = subprocess.run([str(command), "place", str(shot), "-o", "placed.toml", "--jobs", "2",
+                           "--frames", "1:24"],
+                          cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "placed.toml").is_file()
+
+
 def test_malformed_options_are_input_errors() -> None:
     with pytest.raises(InputError, match="placement"):
         build_options(
