@@ -21,7 +21,13 @@ import click
 import camtraj
 from camtraj import interrupts, jsonsafe
 from camtraj.batch import batch_command
-from camtraj.errors import CamtrajError, CollisionError, InputError, UnreachableFramesError
+from camtraj.errors import (
+    CamtrajError,
+    CollisionError,
+    InputError,
+    UnreachableFramesError,
+    one_line,
+)
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
@@ -255,6 +261,9 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
         for extra in (rig_layer, layout, report):
             if extra is not None:
                 click.echo(f"  wrote {extra}")
+    else:  # the report's warnings are the shot's: -q moves them to stderr, not away
+        for warning in result.get("warnings", []):
+            click.echo(one_line(f"warning: {warning}"), err=True)
 
 
 @main.command()

@@ -657,3 +657,20 @@ def test_the_readme_states_the_frame_and_rate_caps_the_code_enforces() -> None:
     assert found, "the README no longer states the frame and rate caps"
     assert int(found[1].replace(",", "")) == MAX_FRAMES
     assert float(found[2].replace(",", "")) == MAX_FPS
+
+
+def test_quiet_convert_still_says_the_shots_warnings_on_stderr(tmp_path: Path) -> None:
+    """``convert -q`` prints nothing on stdout; the report's warnings (here a camera without
+    a focal length) go to stderr, as its --help says, not away."""
+    stage = _stage(tmp_path / "bare.usda")
+    _camera(stage)
+    stage.GetRootLayer().Save()
+    loud = run_cli("convert", tmp_path / "bare.usda", "-o", tmp_path / "loud.mcap")
+    assert loud.returncode == 0, loud.stderr
+    said = [line.strip() for line in loud.stdout.splitlines()
+            if line.strip().startswith("warning: ")]
+    assert any("has no focalLength" in line for line in said), loud.stdout
+    quiet = run_cli("convert", tmp_path / "bare.usda", "-o", tmp_path / "quiet.mcap", "-q")
+    assert quiet.returncode == 0, quiet.stderr
+    assert quiet.stdout == ""
+    assert quiet.stderr.splitlines() == said
