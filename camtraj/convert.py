@@ -28,7 +28,7 @@ from camtraj.errors import (
     RobotFileError,
     ShotFileError,
 )
-from camtraj.ik import PathSolution, solve_path_report
+from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
@@ -119,18 +119,6 @@ def load_placement(options: ConvertOptions) -> Placement:
             layout = "" if sf.layout is None else f", layout {sf.layout}"
             return Placement(sf.base2world, f"{options.set_file}{layout}")
     return Placement()
-
-
-HOLD_POSE_TOL = 1e-12
-"""Consecutive camera poses whose matrix entries differ by at most this (m, or unitless for
-the rotation) are a hold of the camera."""
-
-
-def camera_holds(targets: Array) -> NDArray[np.bool_]:
-    """Per frame pair, whether the camera pose holds still, shape (n - 1,)."""
-    held: NDArray[np.bool_] = np.all(
-        np.abs(np.diff(targets, axis=0)) <= HOLD_POSE_TOL, axis=(1, 2))
-    return held
 
 
 CUT_RATIO = 8.0

@@ -15,7 +15,7 @@ import pytest
 from camtraj import Robot
 from camtraj.ik.refine import _normal_equations
 from camtraj.ik.shot_cost import ShotCost
-from camtraj.ik.spline_ops import spline_ops
+from camtraj.ik.spline_ops import hold_runs, spline_ops
 from camtraj.timing import Limits
 from camtraj.timing.path import FramePath
 
@@ -50,6 +50,43 @@ def test_operators_give_the_timing_stages_spline(robot: Robot, n: int) -> None:
         scale = np.abs(want).max(axis=0)
         assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (order, n)
         assert not values[rows:, :, i].any()
+
+
+@pytest.mark.parametrize(("n", "held_pairs"), [
+    (40, [(15, 22)]),  # a hold in the middle
+    (150, [(0, 9), (60, 61), (100, 149)]),  # holding at the start, one pair, to the end
+    (200, [(20, 30), (33, 40)]),  # a stretch of four frames between two holds
+])
+def test_operators_with_holds_give_the_timing_stages_spline(
+        robot: Robot, n: int, held_pairs: list[tuple[int, int]]) -> None:
+    """Where the camera holds, the robot holds (equal frames), and the timing stage fits each
+    moving stretch as its own spline, clamped to rest next to a hold: the operators give that
+    spline too (jerk at a hold's first frame is the stretch's, as the servo samples before
+    it see it; the hold's own piece there has none)."""
+    q = smooth_path(robot, n, n)
+    held = np.zeros(n - 1, dtype=bool)
+    for a, b in held_pairs:
+        held[a:b] = True
+        q[a + 1:b + 1] = q[a]
+    runs = hold_runs(held)
+    assert runs == tuple(held_pairs)
+    limits = Limits.from_robot(robot)
+    path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, held)
+    knots = np.arange(n, dtype=float)
+    mids = np.arange(n - 1) + 0.5
+    ops = spline_ops(n, runs)
+    values = ops.apply(q)
+    for i, (order, rows) in enumerate(zip(ops.orders, ops.rows, strict=True)):
+        x = knots if rows == n else mids
+        if rows == n:  # a hold's first frame: just before it, on the stretch's last piece
+            first = np.array([a for a, _ in runs if a > 0])
+            x[first] -= 1e-9
+        want = path.at(x, 3)[order]
+        got = values[:rows, :, i]
+        scale = np.abs(want).max(axis=0)
+        assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (order, n)
+        for a, b in runs:  # no use inside a hold
+            assert not got[a + 1:b].any() and (rows == n or not got[a:b].any())
 
 
 def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) -> None:

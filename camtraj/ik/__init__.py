@@ -23,6 +23,7 @@ from camtraj.ik.path import (
     solve_path,
     solve_path_report,
 )
+from camtraj.ik.shot import camera_holds
 from camtraj.ik.sm import IKSolution, motion_cost, solve_ik, traverse
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "MoveToStart",
     "PathMargins",
     "PathSolution",
+    "camera_holds",
     "motion_cost",
     "path_margins",
     "six_axis_solutions",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -14,9 +14,10 @@ from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
 from camtraj.ik.refine import REFINE_STAGES, Refinement
-from camtraj.ik.shot import Candidates, candidates, choose_each, measures
+from camtraj.ik.shot import Candidates, camera_holds, candidates, choose_each, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
+from camtraj.ik.spline_ops import hold_runs
 from camtraj.robot import Robot
 from camtraj.timing import Limits, feasible_speed
 
@@ -211,8 +212,9 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     that step's share of the n frames (the shares add up to n).
     """
     s = robot.ik
-    cost = ShotCost.for_robot(robot, dt)
     n = targets.shape[0]
+    held = camera_holds(targets)  # where the camera holds, the robot holds (every stage)
+    cost = replace(ShotCost.for_robot(robot, dt), holds=hold_runs(held))
     limits = Limits.from_robot(robot)
     times = np.arange(n) * dt
 
@@ -231,13 +233,13 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
 
     runs, firsts = [], []
     for i, (n_track, n_extend) in enumerate(grids):
-        starts = _programme(robot, cost, targets, start, frames, n_track, n_extend)
+        starts = _programme(robot, cost, targets, start, frames, n_track, n_extend, held)
         starts = _one_per_arm(starts) if i == 0 else starts[:1]
         step()
         for k, (branch, x0, y0, lo1, hi1) in enumerate(starts):
             run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
                              rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                             take_speed=take_speed)
+                             take_speed=take_speed, held=held)
             run.stage()
             runs.append(run)
             if k == 0:
@@ -264,15 +266,17 @@ track interval each frame stays in (lo, hi) (n,) each."""
 
 
 def _programme(robot: Robot, cost: ShotCost, targets: Array, start: Array,
-               frames: NDArray[np.int_], n_track: int, n_extend: int) -> list[_Start]:
+               frames: NDArray[np.int_], n_track: int, n_extend: int,
+               held: NDArray[np.bool_]) -> list[_Start]:
     """The dynamic programme's answers on a candidate grid (one per branch label that
     reaches every frame, cheapest first), as refinements' starts: branch per frame,
     track/extend (n, 2), measures (n, 10) and the track interval each frame stays in (its
-    candidates are freed on return: they are the solver's largest arrays)."""
+    candidates are freed on return: they are the solver's largest arrays). ``held``: the
+    frame pairs where the camera holds still."""
     n = targets.shape[0]
     cand = candidates(robot, targets, n_track, n_extend)
     cand = _rescue_empty_frames(robot, targets, cand, frames)
-    choices = choose_each(cost, cand, start)
+    choices = choose_each(cost, cand, start, held)
     if not choices:  # pragma: no cover - every frame has a feasible candidate by now
         msg = "internal error: no candidate path through the shot"
         raise RuntimeError(msg)

@@ -103,14 +103,18 @@ class Refinement:
         tolerance: Relative decrease below which a stage has converged.
         take_speed: The maximum feasible speed of a joint path (n, 8) as the timing stage
             finds it (default: ``1 / cost.peak``, the objective's own model).
+        held: The frame pairs (n - 1,) where the camera holds still: their frames keep equal
+            track and extend values (x0 has them equal), so the robot holds still there.
     """
 
     def __init__(self, robot: Robot, cost: ShotCost, targets: Array, branch: IntArray,
                  x0: Array, y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
                  tolerance: float = 1e-4,
-                 take_speed: Callable[[Array], float] | None = None) -> None:
+                 take_speed: Callable[[Array], float] | None = None,
+                 held: NDArray[np.bool_] | None = None) -> None:
         self.robot, self.cost, self.targets, self.branch = robot, cost, targets, branch
         self.rounds, self.tolerance = rounds, tolerance
+        self.tie = _Tie.of(held) if held is not None else None
         self.x, self.y = x0.copy(), y0.copy()
         self.stages_done = 0
         self.mu = 1e-3  # the damping, carried from stage to stage
@@ -131,7 +135,7 @@ class Refinement:
         stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
-                                           loosen * self.tolerance, self.mu, floor)
+                                           loosen * self.tolerance, self.mu, floor, self.tie)
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
             self.best = (v, self.x, self.y)
@@ -145,10 +149,11 @@ class Refinement:
 def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: Array,
            y0: Array, lo1: Array, hi1: Array, rounds: int = 25,
            tolerance: float = 1e-4,
-           take_speed: Callable[[Array], float] | None = None) -> Refined:
+           take_speed: Callable[[Array], float] | None = None,
+           held: NDArray[np.bool_] | None = None) -> Refined:
     """Every stage of a :class:`Refinement` (the same arguments): the fastest answer."""
     run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1, rounds, tolerance,
-                     take_speed)
+                     take_speed, held)
     for _ in _STAGES:
         run.stage()
     return run.result()
@@ -156,10 +161,11 @@ def refine(robot: Robot, cost: ShotCost, targets: Array, branch: IntArray, x0: A
 
 def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
              branch: IntArray, x: Array, y: Array, rounds: int, tolerance: float,
-             mu: float, floor: float) -> tuple[Array, Array, float]:
+             mu: float, floor: float, tie: _Tie | None = None) -> tuple[Array, Array, float]:
     """Damped Gauss-Newton (Levenberg-Marquardt) on ``cost.refine_total`` until converged,
-    from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_STAGES`): the curves
-    and the damping reached."""
+    from damping ``mu``, uses' curvature floored at ``floor`` (:data:`_STAGES`), with the
+    frames of each camera hold moved together (``tie``): the curves and the damping
+    reached."""
     targets2 = np.concatenate([targets] * 2)
     b2 = np.tile(branch, 2)
     use = cost.take_use(y[:, :8])
@@ -168,9 +174,14 @@ def _descend(robot: Robot, cost: ShotCost, corridor: _Corridor, targets: Array,
     for _ in range(rounds):
         grad_y = _jacobian(robot, targets2, b2, x, y)
         H, g, w, c = _normal_equations(cost, y, grad_y, floor, use)
+        tied = tie.reduce(H, g, w) if tie is not None else None
         improved = False
         for _try in range(10):
-            step = _solve_rank1(H, g, mu, w, c)
+            if tie is not None and tied is not None:  # the step of the tied curves
+                Hr, gr, wr = tied
+                step = tie.expand(_solve_rank1(Hr, gr, mu, wr, c))
+            else:
+                step = _solve_rank1(H, g, mu, w, c)
             xn, yn, jn, un = _try_step(robot, cost, corridor, targets, branch, x, y, step)
             if jn < j:
                 improved = True
@@ -423,6 +434,49 @@ def _windows(v: Array, width: int) -> Array:
     padded = np.zeros((v.shape[0] + 2 * (width - 1), *v.shape[1:]))
     padded[width - 1:width - 1 + v.shape[0]] = v
     return np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)
+
+
+@dataclass(frozen=True)
+class _Tie:
+    """The frames of each camera hold as one: frame k's values are run ``run[k]``'s (runs of
+    frames joined by held pairs, numbered along the shot)."""
+
+    run: IntArray
+    count: int
+
+    @classmethod
+    def of(cls, held: NDArray[np.bool_]) -> _Tie | None:
+        """The tie of the held frame pairs (n - 1,); None when nothing holds."""
+        if not held.any():
+            return None
+        run = np.concatenate([[0], np.cumsum(~held)]).astype(np.intp)
+        return cls(run, int(run[-1]) + 1)
+
+    def reduce(self, H: Array, g: Array, w: Array) -> tuple[Array, Array, Array]:
+        """The normal equations (:func:`_normal_equations`' H, g and w) in the runs' values:
+        P^T H P, P^T g, P^T w for the (n, runs) map P from runs to frames. A pair of frames
+        d apart lies in runs at most d apart, so the band keeps its width; a pair inside one
+        run adds both its off-diagonal blocks to the run's diagonal block."""
+        n, width = H.shape[:2]
+        k, d = np.meshgrid(np.arange(n), np.arange(width), indexing="ij")
+        inside = k + d < n
+        k, d = k[inside], d[inside]
+        blocks = H[k, d]
+        rk = self.run[k]
+        e = self.run[k + d] - rk
+        same = (e == 0) & (d > 0)
+        blocks[same] += blocks[same].swapaxes(-1, -2)
+        Hr = np.zeros((self.count, width, 2, 2))
+        np.add.at(Hr, (rk, e), blocks)
+        gr = np.zeros((self.count, 2))
+        wr = np.zeros((self.count, 2))
+        np.add.at(gr, self.run, g)
+        np.add.at(wr, self.run, w)
+        return Hr, gr, wr
+
+    def expand(self, step: Array) -> Array:
+        """The frames' values (n, 2) of the runs' values (runs, 2)."""
+        return np.asarray(step[self.run])
 
 
 def _solve_rank1(H: Array, g: Array, mu: float, w: Array, c: float) -> Array:

@@ -54,6 +54,18 @@ _CHUNK = 262_144  # pair-cost elements per vectorised block (2 MB each, a few te
 _POINTS = 4_096  # candidate points solved per vectorised block (the closed form's temporaries)
 
 
+HOLD_POSE_TOL = 1e-12
+"""Consecutive camera poses whose matrix entries differ by at most this (m, or unitless for
+the rotation) are a hold of the camera."""
+
+
+def camera_holds(targets: Array) -> NDArray[np.bool_]:
+    """Per frame pair, whether the camera (or flange) pose holds still, shape (n - 1,)."""
+    held: NDArray[np.bool_] = np.all(
+        np.abs(np.diff(targets, axis=0)) <= HOLD_POSE_TOL, axis=(1, 2))
+    return held
+
+
 @dataclass(frozen=True)
 class Candidates:
     """Every frame's candidate configurations, solved in closed form.
@@ -167,7 +179,8 @@ class StepCosts:
 
     ``states`` turns candidate values (frames, G, 8, ...) into the programme's states
     (frames, C, S, ...); ``chains``: (C, S); ``shared``: track and extend are the same in
-    every chain; ``per``: frames per block.
+    every chain; ``per``: frames per block; ``held`` (n - 1,): the frame pairs where the
+    camera holds still, whose only step is to the same state (the robot holds still too).
     """
 
     cost: ShotCost
@@ -177,6 +190,7 @@ class StepCosts:
     shared: bool
     wrap: bool
     per: int
+    held: NDArray[np.bool_] | None = None
 
     def block(self, a: int, e: int) -> Array:
         """Step costs from frames a..e-1 to the next (e - a, C, S, S); infeasible states
@@ -198,12 +212,16 @@ class StepCosts:
         if e == n - 1:
             qs = self.states(y[-2:, :, :, :8])
             pair[-1] += self.cost.edge_cost(qs[-1, :, None, :, :], qs[-2, :, :, None, :])
+        if self.held is not None and self.held[a:e].any():
+            # a hold of the camera (equal poses, so equal candidates) is a hold of the robot
+            pair[self.held[a:e]] = np.where(np.eye(s, dtype=bool), pair[self.held[a:e]],
+                                            np.inf)
         return pair
 
 
-def chain_costs(cost: ShotCost, cand: Candidates, merged: bool,
-                wrap: bool = True) -> tuple[Array, StepCosts]:
-    """The dynamic programme's tables.
+def chain_costs(cost: ShotCost, cand: Candidates, merged: bool, wrap: bool = True,
+                held: NDArray[np.bool_] | None = None) -> tuple[Array, StepCosts]:
+    """The dynamic programme's tables (``held``: :attr:`StepCosts.held`).
 
     With ``wrap`` a revolute step is the shorter way round (the joint values of a state are
     one representative of its angle); without, it is the difference of the states' values
@@ -231,7 +249,7 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool,
         unary[a:a + per] = np.where(ok[a:a + per], cost.unary(states(cand.y[a:a + per])),
                                     np.inf)
     return unary, StepCosts(cost, cand, states, (c, s), shared, wrap,
-                            max(1, _CHUNK // max(c * s * s, 1)))
+                            max(1, _CHUNK // max(c * s * s, 1)), held)
 
 
 def viterbi(unary: Array, steps: StepCosts) -> tuple[Array, IntArray]:
@@ -284,17 +302,20 @@ class DPChoice:
     y: Array
 
 
-def choose(cost: ShotCost, cand: Candidates, start: Array) -> DPChoice | None:
+def choose(cost: ShotCost, cand: Candidates, start: Array,
+           held: NDArray[np.bool_] | None = None) -> DPChoice | None:
     """The dynamic programme's cheapest answer (:func:`choose_each`'s first), None when no
     sequence of candidates reaches every frame."""
-    choices = choose_each(cost, cand, start)
+    choices = choose_each(cost, cand, start, held)
     return choices[0] if choices else None
 
 
-def choose_each(cost: ShotCost, cand: Candidates, start: Array) -> list[DPChoice]:
+def choose_each(cost: ShotCost, cand: Candidates, start: Array,
+                held: NDArray[np.bool_] | None = None) -> list[DPChoice]:
     """Run the dynamic programme: the cheapest path of each branch label that reaches every
     frame, cheapest first (one path over the merged chains if no label does; none if no
-    sequence of candidates reaches every frame).
+    sequence of candidates reaches every frame). Where the camera holds (``held`` (n - 1,),
+    :func:`camera_holds`) the path stays on its state: the robot holds still.
 
     Revolute steps are first taken the shorter way round; if a chosen path, made
     continuous, cannot stay inside the position limits (a rotation of more than the range
@@ -304,7 +325,7 @@ def choose_each(cost: ShotCost, cand: Candidates, start: Array) -> list[DPChoice
     """
     out: list[DPChoice] = []
     laned: dict[int, DPChoice] | None = None
-    for choice in _choose(cost, cand, wrap=True):
+    for choice in _choose(cost, cand, wrap=True, held=held):
         y = choice.y.copy()
         y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
         if inside_limits(y[:, :8], cost.lower, cost.upper):
@@ -312,18 +333,20 @@ def choose_each(cost: ShotCost, cand: Candidates, start: Array) -> list[DPChoice
             continue
         if laned is None:
             again = replace(cand, y=lanes(cand.y, cost.lower, cost.upper, start))
-            laned = {int(c.branch[0]): c for c in _choose(cost, again, wrap=False)}
+            laned = {int(c.branch[0]): c for c in _choose(cost, again, wrap=False,
+                                                          held=held)}
         if int(choice.branch[0]) in laned:
             out.append(laned[int(choice.branch[0])])
     return sorted(out, key=lambda c: c.cost)
 
 
-def _choose(cost: ShotCost, cand: Candidates, wrap: bool) -> list[DPChoice]:
+def _choose(cost: ShotCost, cand: Candidates, wrap: bool,
+            held: NDArray[np.bool_] | None = None) -> list[DPChoice]:
     """The cheapest path of each label that reaches every frame (else of the merged chains),
     cheapest first."""
     n, g = cand.r1.shape
     for merged in (False, True):
-        unary, steps = chain_costs(cost, cand, merged, wrap)
+        unary, steps = chain_costs(cost, cand, merged, wrap, held)
         best, path = viterbi(unary, steps)
         labels = (np.zeros(1, dtype=np.intp) if merged
                   else np.flatnonzero(cand.ok.any(axis=1).all(axis=0)))

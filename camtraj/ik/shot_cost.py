@@ -144,6 +144,9 @@ class ShotCost:
             frame's squared margin intrusions (relative to the peak use), of the steep part
             of a zone, and of the mean F per step.
         power, scale: The refinement's power mean of the take's uses.
+        holds: The frames (first, last) where the camera, and so the robot, holds still
+            (:func:`~camtraj.ik.spline_ops.hold_runs`): the take's spline is clamped to rest
+            next to them, as the timing stage fits it.
     """
 
     lower: Array
@@ -164,6 +167,7 @@ class ShotCost:
     tie_break: float = 0.01
     power: float = 8.0
     scale: float = 1.0
+    holds: tuple[tuple[int, int], ...] = ()
 
     @classmethod
     def for_robot(cls, robot: Robot, dt: float) -> ShotCost:
@@ -189,7 +193,7 @@ class ShotCost:
         if n < 3:
             ops = BandOps((1,), (n - 1,), np.tile([[[-1.0], [1.0]]], (n - 1, 1, 1)), 0)
             return TakeUse(ops, ops.apply(q / self.vel), None)
-        ops = spline_ops(n)
+        ops = spline_ops(n, self.holds)
         lims = np.stack([(self.vel, self.acc, self.jerk)[k - 1] for k in ops.orders], axis=-1)
         z = ops.apply(q) / lims
         vel_z, acc_z = z[[0, -1], :, 0], z[[0, -1], :, 2]  # order 1 and 2 at the knots

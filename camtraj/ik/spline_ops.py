@@ -85,12 +85,17 @@ def _derivative(c: Array, d: int, tau: float) -> Array:
     return np.asarray(acc)
 
 
-def _responses(n: int) -> dict[tuple[int, float], Array]:
+def _responses(n: int, clamp: tuple[bool, bool] = (False, False)
+               ) -> dict[tuple[int, float], Array]:
     """Dense (rows, n) responses of each (order, evaluation point): knots 0..n-1 (tau 0, the
-    last knot as the end of the last piece) and piece middles (tau 0.5)."""
+    last knot as the end of the last piece) and piece middles (tau 0.5). ``clamp``: whether
+    the first / last knot is next to a hold (velocity and acceleration zero there, as the
+    timing stage clamps it; the held frames are equal) rather than a free end of the shot."""
     y = np.eye(n)
     none = np.zeros((n, n), dtype=bool)
-    v, w = solve_knot_derivatives(y, none, np.zeros((n, n)), np.zeros((n, n)),
+    clamped = none.copy()
+    clamped[0], clamped[-1] = clamp
+    v, w = solve_knot_derivatives(y, clamped, np.zeros((n, n)), np.zeros((n, n)),
                                   end_jerk(y, none[1:]))
     c = hermite_coefficients(y, v, w)  # (n - 1, 6, n)
     out = {}
@@ -101,11 +106,24 @@ def _responses(n: int) -> dict[tuple[int, float], Array]:
     return out
 
 
-@lru_cache(maxsize=4)  # per path length: the solve's own, not kept for long
-def spline_ops(n: int) -> BandOps:
+def hold_runs(held: NDArray[np.bool_]) -> tuple[tuple[int, int], ...]:
+    """The frames (first, last) of each run of held frame pairs (n - 1,): the camera holds
+    still from ``first`` to ``last``."""
+    edges = np.diff(np.concatenate([[0], held.astype(np.int8), [0]]))
+    return tuple((int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1),
+                                                   np.flatnonzero(edges == -1), strict=True))
+
+
+@lru_cache(maxsize=4)  # per path length and holds: the solve's own, not kept for long
+def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = ()) -> BandOps:
     """The six operators (orders 1-3 at knots and at piece middles, in that order: velocity
     at knots, at middles, acceleration at knots, ...) for a path of n >= 3 frames, side by
     side (n rows; the middles' last row is empty).
+
+    ``holds`` (:func:`hold_runs`): where the camera holds, the robot holds (its frames are
+    equal), and the timing stage fits each moving stretch between holds as its own spline,
+    its knots next to a hold clamped to rest: each stretch gets its own operators, and the
+    rows of a hold are zero (a still robot uses no limit).
 
     A derivative of order d of the spline is zero on polynomials below degree d (the natural
     quintic spline reproduces them), so it is a weighted sum of the path's d-th differences;
@@ -113,24 +131,51 @@ def spline_ops(n: int) -> BandOps:
     polynomials (a long path far from zero loses nothing to the cut).
     """
     k = HALF_WIDTH
+    width = 2 * k + 2
+    orders = (1, 1, 2, 2, 3, 3)
+    counts = (n, n - 1, n, n - 1, n, n - 1)
+    if not holds:
+        coef, inner = _stretch(n, (False, False))
+        return BandOps(orders, counts, coef, -k, inner)
+    coef = np.zeros((n, width, len(orders)))
+    inner = (0, 0)
+    start = 0
+    for a, b in (*holds, (n - 1, n - 1)):
+        if a > start:  # the moving stretch of frames start..a
+            part, (ia, ib) = _stretch(a - start + 1, (start > 0, a < n - 1))
+            coef[start:a + 1] = part
+            if ib - ia > inner[1] - inner[0]:  # one shift-invariant range: the longest
+                inner = (start + ia, start + ib)
+        start = b
+    return BandOps(orders, counts, coef, -k, inner)
+
+
+def _stretch(n: int, clamp: tuple[bool, bool]) -> tuple[Array, tuple[int, int]]:
+    """:func:`spline_ops`' weights (n, width, 6) of one spline of n >= 2 frames, with its
+    ends free or clamped (:func:`_responses`), and its shift-invariant rows."""
+    k = HALF_WIDTH
     small = n <= 2 * _END + 4 * k
     m = n if small else 2 * _END + 4 * k
-    dense = _responses(m)
+    dense = _responses(m, clamp)
     width = 2 * k + 2
     coef = np.zeros((n, width, len(dense)))
-    orders, counts = [], []
     inner = (0, n)
     for i, ((d, _tau), resp) in enumerate(dense.items()):
+        # A free spline reproduces polynomials below degree 5, so its order-d responses are
+        # weights of d-th differences; clamped to rest next to a hold it reproduces only
+        # constants (the hold's), so its responses are weights of first differences.
+        undo = d if clamp == (False, False) else 1
         weights = resp
-        for _ in range(d):  # resp == weights @ (d-th difference matrix): undo one at a time
+        for _ in range(undo):  # resp == weights @ (difference matrix): undo one at a time
             weights = -np.cumsum(weights, axis=1)[:, :-1]
         rows_m = resp.shape[0]
-        wa, oa = width - d, -k
+        wa, oa = width - undo, -k
         idx = np.arange(rows_m)[:, None] + oa + np.arange(wa)[None, :]
-        inside = (idx >= 0) & (idx < m - d)
+        inside = (idx >= 0) & (idx < m - undo)
         if m > d:
             band = np.where(inside,
-                            weights[np.arange(rows_m)[:, None], np.clip(idx, 0, m - d - 1)],
+                            weights[np.arange(rows_m)[:, None],
+                                    np.clip(idx, 0, m - undo - 1)],
                             0.0)
         else:  # d or fewer frames lie on a polynomial below degree d: the derivative is zero
             band = np.zeros(idx.shape)
@@ -145,12 +190,10 @@ def spline_ops(n: int) -> BandOps:
             a[rows - (rows_m - half):] = band[half:]
             a[half:rows - (rows_m - half)] = band[half]  # the shift-invariant kernel
             inner = (max(inner[0], half), min(inner[1], rows - (rows_m - half)))
-        stencil = np.diff(np.eye(d + 1), d, axis=0)[0]  # d-th difference weights
+        stencil = np.diff(np.eye(undo + 1), undo, axis=0)[0]  # the differences' weights
         for j, c in enumerate(stencil):
             coef[:rows, j:j + wa, i] += c * a
-        orders.append(d)
-        counts.append(rows)
-    return BandOps(tuple(orders), tuple(counts), coef, -k, inner)
+    return coef, inner
 
 
-__all__ = ["HALF_WIDTH", "BandOps", "spline_ops"]
+__all__ = ["HALF_WIDTH", "BandOps", "hold_runs", "spline_ops"]
