@@ -191,8 +191,11 @@ def build_rig_layer(shot: Shot, robot: Robot, base2world: ArrayLike, frame_q: Ar
     stage = Usd.Stage.Open(layer)
     UsdGeom.SetStageMetersPerUnit(stage, shot.meters_per_unit)
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if shot.up_axis == "Y" else UsdGeom.Tokens.z)
-    stage.SetTimeCodesPerSecond(shot.time_codes_per_second)
-    stage.SetFramesPerSecond(shot.fps)
+    # the shot's rates as it writes them: USD retimes a sublayer whose timeCodesPerSecond
+    # differs from the stage's (59.94 against 60000/1001 put every key 1 ppm off its frame)
+    tcps, fps = shot.stage_rates or (shot.time_codes_per_second, shot.fps)
+    stage.SetTimeCodesPerSecond(tcps)
+    stage.SetFramesPerSecond(fps)
     stage.SetStartTimeCode(float(tc[0]))
     stage.SetEndTimeCode(float(tc[-1]))
     layer.documentation = (

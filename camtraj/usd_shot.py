@@ -111,7 +111,10 @@ class Shot:
         warnings: One-line notes about the shot that do not stop it (an implausible focal
             length or film back, lens shift or film shake, an orthographic camera, a sheared
             camera transform or parent, non-square render pixels).
-        time_codes_per_second: The stage's ``timeCodesPerSecond``.
+        time_codes_per_second: The stage's ``timeCodesPerSecond`` (NTSC rates exact).
+        stage_rates: The stage's ``timeCodesPerSecond`` and ``framesPerSecond`` exactly as
+            written (None: not read from a stage). A layer composed with the shot must say
+            the same: USD retimes a sublayer by the ratio of the two layers' rates.
         horizontal_aperture_mm: (n,) film back width in [mm].
         vertical_aperture_mm: (n,) film back height in [mm].
         clipping_range_m: (n, 2) near and far clipping distances in [m].
@@ -139,6 +142,7 @@ class Shot:
     warnings: tuple[str, ...] = ()
     horizontal_aperture_offset_mm: NDArray[np.float64] | None = None
     vertical_aperture_offset_mm: NDArray[np.float64] | None = None
+    stage_rates: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frames)
@@ -361,6 +365,10 @@ def _read(
         if stage.HasAuthoredMetadata("framesPerSecond")
         else tcps
     )
+    written_tcps = _positive_metadata(stage, path, "timeCodesPerSecond",
+                                      stage.GetTimeCodesPerSecond)
+    written_fps = (_positive_metadata(stage, path, "framesPerSecond", stage.GetFramesPerSecond)
+                   if stage.HasAuthoredMetadata("framesPerSecond") else written_tcps)
     frame_numbers = _film_frames(stage, path, prim, frames, frames_per_code=fps / tcps)
     time_codes = frame_numbers.astype(np.float64) * float(tcps / fps)
 
@@ -442,6 +450,7 @@ def _read(
         clipping_range_m=lens["clippingRange"] * meters_per_unit,
         horizontal_aperture_offset_mm=offset_mm[0],
         vertical_aperture_offset_mm=offset_mm[1],
+        stage_rates=(written_tcps, written_fps),
     )
 
 

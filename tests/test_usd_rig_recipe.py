@@ -37,12 +37,17 @@ def _camera_world(stage: Usd.Stage, prim: Usd.Prim, frames: list[float]) -> np.n
     return np.array(out)
 
 
-@pytest.mark.parametrize(("sample", "up", "mpu"), [
-    ("blender_crane_up", "Z", 1.0), ("maya_dolly_push_in", "Y", 0.01)])
+@pytest.mark.parametrize(("sample", "up", "mpu", "rate"), [
+    ("blender_crane_up", "Z", 1.0, None), ("maya_dolly_push_in", "Y", 0.01, None),
+    ("blender_crane_up", "Z", 1.0, "59.94")])  # an NTSC rate as written, not 60000/1001
 def test_the_readme_recipe_composes_rig_and_shot(
-    tmp_path: Path, sample: str, up: str, mpu: float
+    tmp_path: Path, sample: str, up: str, mpu: float, rate: str | None
 ) -> None:
-    shutil.copy(ROOT / "samples" / "shots" / f"{sample}.usda", tmp_path / "shot.usda")
+    text = (ROOT / "samples" / "shots" / f"{sample}.usda").read_text(encoding="utf-8")
+    if rate is not None:
+        text = re.sub(r"(framesPerSecond|timeCodesPerSecond) = 24\b", rf"\1 = {rate}", text)
+        assert text.count(rate) == 2
+    (tmp_path / "shot.usda").write_text(text, encoding="utf-8")
     convert(tmp_path / "shot.usda", tmp_path / "shot.mcap", ConvertOptions(),
             rig_layer=tmp_path / "shot.rig.usda")
     here = os.getcwd()
@@ -75,6 +80,14 @@ def test_the_readme_recipe_composes_rig_and_shot(
     # (the samples' matrices are written to 6-7 digits: not quite orthonormal, hence 0.1 mm)
     assert dp <= 1e-4 / mpu and dr <= 1e-5  # 0.1 mm, in the stage's units
     assert np.ptp(b[:, :3, 3], axis=0).max() > 0.1 / mpu  # the camera does move
+    # composed, the rig's keys are on the shot's frames (a rate written differently from the
+    # shot's retimed them: 59.94 against 60000/1001 put frame 1 at time code 0.999999)
+    keyed = [a for p in Usd.PrimRange(rig[0].GetParent()) for a in p.GetAttributes()
+             if a.GetNumTimeSamples() > 1]
+    assert keyed
+    for attr in keyed:
+        times = attr.GetTimeSamples()
+        assert times == [float(t) for t in range(round(first), round(last) + 1)], attr.GetPath()
 
 
 def test_a_bare_sublayer_stage_loses_the_shot_metadata(tmp_path: Path) -> None:
