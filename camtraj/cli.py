@@ -332,13 +332,21 @@ def info(mcap_file: str, as_json: bool) -> None:
         return
     meta = d.get("metadata") or {}
     fr = d.get("frames") or {}
+    mode = meta.get("timing_mode")
+    # optimal: every frame is a sample, so the steps vary (the mean rate would mislead)
+    servo = (", servo steps vary" if mode == "optimal" else
+             f" at {d['servo_rate_hz']:.1f} Hz" if d.get("servo_rate_hz") else "")
+    try:
+        factor = f"{float(meta['speed_factor']):.4g}"
+    except (KeyError, TypeError, ValueError):
+        factor = str(meta.get("speed_factor"))
+    rate = d.get("frame_rate_hz")
     lines = [
         f"file       {d['path']}  ({d['size_bytes'] / 1e6:.2f} MB, profile {d['profile']})",
         f"shot       {d.get('source_file')}  camera {d.get('camera_prim')}",
         f"frames     {fr.get('first')}-{fr.get('last')} ({fr.get('count')} frames at "
-        f"{d.get('frame_rate_hz')} fps)",
-        f"take       {d['duration_s']:.3f} s at {d.get('servo_rate_hz'):.1f} Hz, timing "
-        f"{meta.get('timing_mode')}, speed factor {meta.get('speed_factor')}",
+        f"{f'{rate:.6g}' if isinstance(rate, float) else rate} fps)",
+        f"take       {d['duration_s']:.3f} s{servo}, timing {mode}, speed factor {factor}",
         f"robot      {meta.get('robot')}",
         f"written by {meta.get('tool_version')}",
         "topics:",

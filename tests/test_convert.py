@@ -499,6 +499,16 @@ def test_the_servo_steps_printed_are_the_takes(runs: dict[str, Run]) -> None:
                     and "not a fixed period" in line), line
         else:
             assert f"servo {1e3 / steps.max():.1f} Hz" in line, line
+        # info on the file says the same: the rate of a uniform take, not a mean over steps
+        # that vary (an optimal take was shown as "at 255.1 Hz" while its steps were 4 ms)
+        shown = subprocess.run([sys.executable, "-m", "camtraj", "info", str(run.mcap)],
+                               capture_output=True, text=True, check=True).stdout
+        take_line = next(x for x in shown.splitlines() if x.startswith("take "))
+        factor = f"speed factor {summary['speed_factor']:.4g}"
+        assert take_line.endswith(f"timing {summary['timing']}, {factor}"), take_line
+        assert (", servo steps vary," in take_line) == varies, take_line
+        if not varies:
+            assert f" at {1e3 / steps.max():.1f} Hz," in take_line, take_line
 
 
 # --------------------------------------------------------------------------------------------
