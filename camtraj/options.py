@@ -23,6 +23,8 @@ EDGE_MODES = ("gentle", "fast")
 OBJECTIVES = ("shot", "paper")
 FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
+RATE_RANGE = (10.0, 10000.0)
+"""The servo rates a take may be sampled at [Hz]."""
 
 
 @dataclass(frozen=True)
@@ -69,8 +71,9 @@ class ConvertOptions:
         if self.timing not in TIMING_MODES:
             msg = f"timing must be one of {', '.join(TIMING_MODES)}, got {self.timing!r}"
             raise InputError(msg)
-        if not (math.isfinite(self.rate) and 10.0 <= self.rate <= 10000.0):
-            msg = f"rate must be between 10 and 10000 Hz, got {self.rate}"
+        if not (math.isfinite(self.rate) and RATE_RANGE[0] <= self.rate <= RATE_RANGE[1]):
+            msg = (f"rate must be between {RATE_RANGE[0]:g} and {RATE_RANGE[1]:g} Hz, got "
+                   f"{self.rate}")
             raise InputError(msg)
         if self.start_from is not None and len(self.start_from) != 8:
             msg = f"start-from needs 8 joint values, got {len(self.start_from)}"
@@ -176,7 +179,7 @@ def convert_options(func: F) -> F:
                      help="Film frame range of the shot to use (inclusive)."),
         click.option(
             "--rate",
-            type=click.FloatRange(min=0.0, min_open=True),
+            type=click.FloatRange(*RATE_RANGE),
             default=250.0,
             show_default=True,
             help="Servo rate [Hz].",
