@@ -353,9 +353,11 @@ def _convert_one(
                           summary_extra={OPTIONS_KEY: options_to_json(options)},
                           rig_layer=rig_layer)
     except CamtrajError as exc:
+        # the batch names the shot on every line: a message that starts with it says it once
+        reason = str(exc).removeprefix(f"{shot}: ") or type(exc).__name__
         outcome: dict[str, Any] = {
             "status": "failed",
-            "reason": str(exc) or type(exc).__name__,
+            "reason": reason,
             "exit_code": exc.exit_code,
             "error": type(exc).__name__,
         }

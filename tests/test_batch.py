@@ -181,6 +181,10 @@ def test_bad_input_shot_makes_exit_code_2_and_the_rest_still_convert(tmp_path: P
     assert by_name["unreachable"].exit_code == 3
     assert report.exit_code == 2
     assert (tmp_path / "o" / "good.mcap").is_file()
+    # each shot's reason is its own message without its name: the batch's ERROR line and
+    # table name the shot once (the reader's message starts with the path)
+    reason = by_name["garbage"].reason
+    assert reason and not reason.startswith(f"{bad}:"), reason
 
 
 def test_duplicate_stems_are_refused_before_starting(tmp_path: Path) -> None:
