@@ -338,11 +338,13 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
                 f"{int(shot.frames[int(np.argmax(off))])}) is not reachable with the "
                 f"{lens.focal_length_mm:g} mm prime {lens.name}: the camera info shows "
                 f"{lens.focal_length_mm:g} mm")
-    for axis, what in (("focus", "focus distance"), ("iris", "f-stop")):
+    for axis, what, unit in (("focus", "focus distance", " m"), ("iris", "f-stop", "")):
         x = shot_quantity(shot, axis)
         if lens.axis(axis) is None and float(np.ptp(x)) > 0.0:
+            span = (f"{float(x.min()):.4g}{unit} to {float(x.max()):.4g}{unit}" if unit else
+                    f"f/{float(x.min()):.4g} to f/{float(x.max()):.4g}")
             out.append(
-                f"the shot animates its {what} ({float(x.min()):.4g} to {float(x.max()):.4g}) "
+                f"the shot animates its {what} ({span}) "
                 f"but the lens {lens.name} has no {axis} calibration: the {axis} is not "
                 "driven")
     return out

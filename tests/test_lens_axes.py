@@ -294,6 +294,11 @@ def test_animated_focus_and_stop_without_motors_warn(tmp_path: Path) -> None:
     warnings = " | ".join(result["warnings"])
     assert "focus distance" in warnings and "no focus calibration" in warnings
     assert "f-stop" in warnings and "no iris calibration" in warnings
+    # with their units: metres of focus, f-numbers
+    focus = next(w for w in result["warnings"] if "no focus calibration" in w)
+    iris = next(w for w in result["warnings"] if "no iris calibration" in w)
+    assert re.search(r"focus distance \([0-9.]+ m to [0-9.]+ m\)", focus), focus
+    assert re.search(r"f-stop \(f/[0-9.]+ to f/[0-9.]+\)", iris), iris
 
 
 def test_without_a_lens_nothing_changes(dolly: dict[str, Any]) -> None:
