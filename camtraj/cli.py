@@ -7,11 +7,13 @@ Errors are printed as one ``ERROR:`` line naming the frames, axes and margins; n
 from __future__ import annotations
 
 import contextlib
+import errno
 import importlib
 import logging
 import logging.handlers
 import math
 import os
+import signal
 import sys
 import warnings
 from typing import Any, ClassVar, NoReturn
@@ -184,6 +186,9 @@ def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
     with contextlib.suppress(OSError, ValueError):
         null = os.open(os.devnull, os.O_WRONLY)
         os.dup2(null, sys.stdout.fileno())  # what is still buffered goes nowhere, quietly
+    if exc.errno == errno.EPIPE:  # `camtraj check ... | head`: the reader has what it wanted
+        sys.exit(code if isinstance(code, int) and code != 0 else 128 + signal.SIGPIPE)
+    with contextlib.suppress(OSError, ValueError):
         reason = exc.strerror or str(exc)
         click.echo(f"ERROR: cannot write to standard output: {reason[:1].lower()}{reason[1:]}",
                    err=True)

@@ -674,3 +674,21 @@ def test_quiet_convert_still_says_the_shots_warnings_on_stderr(tmp_path: Path) -
     assert quiet.returncode == 0, quiet.stderr
     assert quiet.stdout == ""
     assert quiet.stderr.splitlines() == said
+
+
+@pytest.mark.parametrize("shot", ["maya_dolly_push_in", "whip_pan"])
+def test_a_reader_that_stops_early_gets_no_error_line(shot: str) -> None:
+    """``camtraj check shot | head -1`` where the reader has gone before the report is
+    written: no "ERROR: cannot write to standard output" on stderr, exit 141 (128 +
+    SIGPIPE) as for any tool a pipe stops."""
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before a line is written
+    try:
+        proc = subprocess.run([sys.executable, "-m", "camtraj", "check",
+                               str(SHOTS / f"{shot}.usda")],
+                              stdout=write, stderr=subprocess.PIPE, text=True, check=False,
+                              cwd=ROOT)
+    finally:
+        os.close(write)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
