@@ -361,6 +361,9 @@ def _convert_one(
             "exit_code": exc.exit_code,
             "error": type(exc).__name__,
         }
+        speed = getattr(exc, "max_speed", None)  # a take over its limits: how fast it can go
+        if isinstance(speed, float) and math.isfinite(speed):
+            outcome["summary"] = {"max_speed": speed}
     except Exception as exc:  # a bug: report it as this shot's failure and go on
         outcome = {
             "status": "failed",

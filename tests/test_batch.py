@@ -69,6 +69,15 @@ def test_report_lists_every_shot_with_its_status(
             summary = json.loads(Path(entry["summary_path"]).read_text())
             assert summary["status"]
     assert report["counts"] == {"ok": 3, "failed": 2, "skipped": 0}
+    # A shot over its limits still says how fast it can go (as check does); an unreachable
+    # one has no speed.
+    speeds = {Path(s["shot"]).stem: s["max_speed"] for s in report["shots"]}
+    assert speeds["unreachable"] is None
+    check = subprocess.run([*_camtraj(), "check", str(SAMPLES / "whip_pan.usda"), "--json"],
+                           capture_output=True, text=True, check=False)
+    assert speeds["whip_pan"] == pytest.approx(json.loads(check.stdout)["max_speed"], rel=1e-9)
+    row = next(line for line in proc.stdout.splitlines() if line.startswith("whip_pan.usda"))
+    assert f" {math.floor(100 * speeds['whip_pan'])}% " in row, row
     # The table on stdout names every shot and status.
     for name in (*FEASIBLE, *FAILING):
         assert f"{name}.usda" in proc.stdout
