@@ -396,13 +396,12 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
         for o in range(width):
             gq[base + a + o:base + b + o] += taps[:, :, o]
         # the pair (f, f + d) gets sum over taps o of row f - o's w times the taps' product:
-        # one correlation over windows of rows
-        pairs = np.zeros((width, coef.shape[2], width))  # [o, i, d]: taps o and o + d
-        for d in range(width):
-            pairs[:width - d, :, d] = kern[:width - d] * kern[d:]
+        # one correlation over windows of rows (one batched product: no path search)
         M[:width, base + a:base + a + span] += np.einsum(
-            "takj,jkd->dta", _windows(w[a:b], width), pairs[::-1], optimize=True)
-    for lo, hi in ((0, a), (b, rows)) if b > a else ((0, rows),):
+            "takj,jkd->dta", _windows(w[a:b], width), ops.inner_pairs[::-1],
+            optimize=["einsum_path", (0, 1)])
+    for (lo, hi), pair_products in zip(((0, a), (b, rows)) if b > a else ((0, rows), (0, 0)),
+                                       ops.edge_pairs, strict=True):
         if hi <= lo:
             continue
         # rows with their own weights (near the ends): row r gives frame r + o the tap
@@ -411,21 +410,11 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
         f0 = base + lo
         count = hi - lo
         taps = coef[lo:hi] @ dz[lo:hi].transpose(0, 2, 1)  # (rows, width, 8)
-        pair_w = (_pair_products(coef[lo:hi]) @ w[lo:hi].transpose(0, 2, 1)).reshape(
+        pair_w = (pair_products @ w[lo:hi].transpose(0, 2, 1)).reshape(
             count, width, width, -1)  # (rows, o, d, 8)
         for o in range(width):
             gq[f0 + o:f0 + o + count] += taps[:, o]
             M[:, f0 + o:f0 + o + count] += pair_w[:, o].transpose(1, 0, 2)
-
-
-def _pair_products(coef: Array) -> Array:
-    """coef[r, o, i] coef[r, o + d, i] (zero where o + d is past the row) as (rows,
-    width * width, k), index o * width + d."""
-    rows, width, k = coef.shape
-    out = np.zeros((rows, width, width, k))
-    for d in range(width):
-        out[:, :width - d, d] = coef[:, :width - d] * coef[:, d:]
-    return out.reshape(rows, width * width, k)
 
 
 def _windows(v: Array, width: int) -> Array:

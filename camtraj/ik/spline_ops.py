@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,28 @@ class BandOps:
     offset: int
     inner: tuple[int, int] = (0, 0)
 
+    @cached_property
+    def inner_pairs(self) -> Array:
+        """The shift-invariant kernel's tap pairs (width, k, width): [o, i, d] the product of
+        taps o and o + d of operator i (zero past the kernel)."""
+        width = self.coef.shape[1]
+        kern = self.coef[self.inner[0]]
+        out = np.zeros((width, self.coef.shape[2], width))
+        for d in range(width):
+            out[:width - d, :, d] = kern[:width - d] * kern[d:]
+        return out
+
+    @cached_property
+    def edge_pairs(self) -> tuple[Array, Array]:
+        """The tap pairs of the rows before and after the shift-invariant ones (all rows when
+        there are none), each (rows, width * width, k): index o * width + d for taps o and
+        o + d."""
+        a, b = self.inner
+        ranges = ((0, a), (b, self.coef.shape[0])) if b > a else ((0, self.coef.shape[0]),
+                                                                    (0, 0))
+        return _pair_products(self.coef[ranges[0][0]:ranges[0][1]]), \
+            _pair_products(self.coef[ranges[1][0]:ranges[1][1]])
+
     def apply(self, q: Array) -> Array:
         """Values (rows, m, k) for frame values q (n, m)."""
         rows, width, k = self.coef.shape
@@ -76,6 +98,16 @@ class BandOps:
         lo = -self.offset  # q[j] sits at padded index j + lo
         pad[lo:lo + q.shape[0]] = q[: rows + width - lo]
         return pad
+
+
+def _pair_products(coef: Array) -> Array:
+    """coef[r, o, i] coef[r, o + d, i] (zero where o + d is past the row) as (rows,
+    width * width, k), index o * width + d."""
+    rows, width, k = coef.shape
+    out = np.zeros((rows, width, width, k))
+    for d in range(width):
+        out[:, :width - d, d] = coef[:, :width - d] * coef[:, d:]
+    return out.reshape(rows, width * width, k)
 
 
 def _derivative(c: Array, d: int, tau: float) -> Array:
