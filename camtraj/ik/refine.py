@@ -132,7 +132,10 @@ class Refinement:
         self.stages_done += 1
         if self.corridor is None:
             return
-        stage = replace(self.cost, power=power, scale=max(self.cost.peak(self.y[:, :8]), 1e-6))
+        peak = self.cost.peak(self.y[:, :8])
+        if not peak > 0.0:  # the robot stands still the whole shot: no peak to lower
+            return
+        stage = replace(self.cost, power=power, scale=max(peak, 1e-6))
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
                                            loosen * self.tolerance, self.mu, floor, self.tie)
