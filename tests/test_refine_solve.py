@@ -10,8 +10,9 @@ import pytest
 from camtraj.ik.refine import _solve_banded
 
 
-def dense(H: np.ndarray, mu: float) -> np.ndarray:
-    """The (2n, 2n) matrix the blocks H (n, D, 2, 2) stand for, damped as documented."""
+def band_matrix(H: np.ndarray) -> np.ndarray:
+    """The symmetric (2n, 2n) matrix the blocks H (n, D, 2, 2) stand for (H[k, d] couples
+    frame k with frame k + d)."""
     n, width = H.shape[:2]
     A = np.zeros((2 * n, 2 * n))
     for d in range(width):
@@ -19,8 +20,14 @@ def dense(H: np.ndarray, mu: float) -> np.ndarray:
             A[2 * i:2 * i + 2, 2 * (i + d):2 * (i + d) + 2] = H[i, d]
             if d > 0:
                 A[2 * (i + d):2 * (i + d) + 2, 2 * i:2 * i + 2] = H[i, d].T
+    return A
+
+
+def dense(H: np.ndarray, mu: float) -> np.ndarray:
+    """The (2n, 2n) matrix the blocks H (n, D, 2, 2) stand for, damped as documented."""
+    A = band_matrix(H)
     diag = np.diag(A).copy()
-    A[np.diag_indices(2 * n)] = diag * (1.0 + mu) + 1e-9 * max(diag.max(), 1e-12) + 1e-12
+    A[np.diag_indices(A.shape[0])] = diag * (1.0 + mu) + 1e-9 * max(diag.max(), 1e-12) + 1e-12
     return A
 
 
@@ -64,23 +71,12 @@ def test_tied_normal_equations_are_the_projected_ones() -> None:
     held[[0, 1, 7, 12, 13, 14, 15, 16, 17, 18, 19, 20, 28]] = True
     tie = _Tie.of(held)
     assert tie is not None
-    A = np.zeros((2 * n, 2 * n))
-    for d in range(width):
-        for i in range(n - d):
-            A[2 * i:2 * i + 2, 2 * (i + d):2 * (i + d) + 2] = H[i, d]
-            if d > 0:
-                A[2 * (i + d):2 * (i + d) + 2, 2 * i:2 * i + 2] = H[i, d].T
+    A = band_matrix(H)
     P = np.zeros((2 * n, 2 * tie.count))
     for k, r in enumerate(tie.run):
         P[2 * k:2 * k + 2, 2 * r:2 * r + 2] = np.eye(2)
     Hr, gr, wr = tie.reduce(H, g, w)
-    Ar = np.zeros((2 * tie.count, 2 * tie.count))
-    for d in range(width):
-        for i in range(tie.count - d):
-            Ar[2 * i:2 * i + 2, 2 * (i + d):2 * (i + d) + 2] = Hr[i, d]
-            if d > 0:
-                Ar[2 * (i + d):2 * (i + d) + 2, 2 * i:2 * i + 2] = Hr[i, d].T
-    np.testing.assert_allclose(Ar, P.T @ A @ P, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(band_matrix(Hr), P.T @ A @ P, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(gr.ravel(), P.T @ g.ravel(), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(wr.ravel(), P.T @ w.ravel(), rtol=1e-12, atol=1e-12)
     assert np.array_equal(tie.expand(np.arange(2 * tie.count).reshape(-1, 2)).reshape(-1),
