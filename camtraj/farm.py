@@ -63,11 +63,13 @@ import click
 from camtraj import __version__, jsonsafe
 from camtraj.batch import output_names
 from camtraj.errors import CamtrajError, InputError
+from camtraj.folders import check_can_make
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
     EDGE_MODES,
     FOCAL_LENGTH_UNITS,
     OBJECTIVES,
+    RATE_RANGE,
     TIMING_MODES,
     ConvertOptions,
     build_options,
@@ -207,6 +209,9 @@ def _check_job(shots: Sequence[str], outputs: OutputSet, *, outdir: Path,
                                 *([(rig_layer_for(m), "the task rig layer")] if rig_layers
                                   else []))]
     refuse_overlaps([*((p, f"-o {one_line(p)}") for p in outputs.paths), *planned], inputs)
+    firsts = {Path(p).parent: p for p, _ in reversed(planned)}  # the tasks write there later
+    for p in firsts.values():
+        check_can_make(p, "the task output")
 
 
 # --------------------------------------------------------------------------------------------
@@ -298,7 +303,8 @@ def openjd_template(
         {
             "name": "Rate",
             "type": "FLOAT",
-            "minValue": 1e-9,
+            "minValue": RATE_RANGE[0],
+            "maxValue": RATE_RANGE[1],
             "default": float(options.rate),
             "description": "Servo rate [Hz].",
         }

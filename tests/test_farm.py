@@ -231,6 +231,31 @@ def test_a_bad_lens_or_robot_file_is_refused_at_export(tmp_path: Path, fmt: str)
         assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
 
 
+@pytest.mark.parametrize("fmt", ["openjd", "opencue"])
+def test_an_outdir_the_tasks_cannot_write_is_refused_at_export(tmp_path: Path, fmt: str) -> None:
+    """A file where the task outputs' folder would go: every task would fail on the farm, so
+    export says so, writes no job and exits 2."""
+    (tmp_path / "afile").write_text("not a folder")
+    job = tmp_path / ("job.yaml" if fmt == "openjd" else "job.xml")
+    proc = _run("farm", "export", "--format", fmt, str(SAMPLES / "whip_pan.usda"), "-o",
+                str(job), "--outdir", str(tmp_path / "afile" / "sub"))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr == (f"ERROR: cannot write the task output {tmp_path}/afile/sub/"
+                           f"whip_pan.mcap: {tmp_path}/afile is a file, not a folder\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+def test_the_openjd_rate_parameter_takes_what_convert_takes(tmp_path: Path) -> None:
+    """A rate the task would refuse is refused by the template, before any task runs."""
+    job = tmp_path / "job.yaml"
+    farm.export_openjd([str(SAMPLES / "whip_pan.usda")], job, options=_options(frames="1:12"),
+                       outdir=tmp_path / "out")
+    for rate, ok in (("5", False), ("10", True), ("10000", True), ("10001", False)):
+        run = _openjd("run", str(job), "-p", f"Rate={rate}", "--tasks", "[]", cwd=tmp_path)
+        said = run.stdout + run.stderr
+        assert ("Rate" in said and run.returncode != 0) != ok, (rate, said[-2000:])
+
+
 def test_every_convert_option_reaches_the_openjd_task(tmp_path: Path) -> None:
     robot = tmp_path / "robot.toml"
     shutil.copy2(ROOT / "camtraj" / "data" / "robot.toml", robot)
