@@ -33,7 +33,7 @@ from camtraj.errors import (
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
-from camtraj.shown import edge_use, percent, seconds, speed_percent
+from camtraj.shown import edge_use, percent, seconds, servo, speed_percent
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -338,9 +338,13 @@ def info(mcap_file: str, as_json: bool) -> None:
     meta = d.get("metadata") or {}
     fr = d.get("frames") or {}
     mode = meta.get("timing_mode")
-    # optimal: every frame is a sample, so the steps vary (the mean rate would mislead)
-    servo = (", servo steps vary" if mode == "optimal" else
-             f" at {d['servo_rate_hz']:.1f} Hz" if d.get("servo_rate_hz") else "")
+    steps = d.get("servo_step_ms")
+    if steps is not None:  # written by convert: the grid's shortest and longest step
+        grid = servo(d["servo_rate_hz"] or 0.0, steps)
+        grid = ", " + grid if grid.startswith("servo steps") else grid.replace("servo", " at")
+    else:  # an older file: optimal steps vary (their mean rate would mislead)
+        grid = (", servo steps vary" if mode == "optimal" else
+                f" at {d['servo_rate_hz']:.1f} Hz" if d.get("servo_rate_hz") else "")
     try:
         factor = f"{float(meta['speed_factor']):.4g}"
     except (KeyError, TypeError, ValueError):
@@ -351,7 +355,7 @@ def info(mcap_file: str, as_json: bool) -> None:
         f"shot       {d.get('source_file')}  camera {d.get('camera_prim')}",
         f"frames     {fr.get('first')}-{fr.get('last')} ({fr.get('count')} frames at "
         f"{f'{rate:.6g}' if isinstance(rate, float) else rate} fps)",
-        f"take       {d['duration_s']:.3f} s{servo}, timing {mode}, speed factor {factor}",
+        f"take       {d['duration_s']:.3f} s{grid}, timing {mode}, speed factor {factor}",
         f"robot      {meta.get('robot')}",
         f"written by {meta.get('tool_version')}",
         "topics:",
@@ -483,15 +487,6 @@ MAX_SHOWN_SPEED = 100.0
 """Above this many times real time the report says ">10000%" (the number means nothing)."""
 
 
-def _servo_text(r: dict[str, Any]) -> str:
-    """The servo grid: its rate, or where an optimal retime's steps vary, their range."""
-    short, long = r.get("servo_step_ms") or (0.0, 0.0)
-    if long - short <= 1e-6 * long:
-        return f"servo {r['servo_rate_hz']:.1f} Hz"
-    return (f"servo steps {short:.3f}-{long:.3f} ms (each frame interval in equal steps, "
-            "every frame a sample: not a fixed period)")
-
-
 def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
     """'131% of real time (… 31.54 fps)'; a still camera's speed is unbounded (JSON: null)."""
     if max_speed is None or not math.isfinite(max_speed):
@@ -552,7 +547,8 @@ def _report(r: dict[str, Any]) -> str:
         f"({fr['count']} at {r['fps']:g} fps)",
         f"  timing {r['timing']}: take {seconds(r['duration'])} s (shot "
         f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
-        f"speed factor {r['speed_factor']:.3f}, {_servo_text(r)}",
+        f"speed factor {r['speed_factor']:.3f}, "
+        f"{servo(r['servo_rate_hz'], r.get('servo_step_ms'))}",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
         "(extent)   margin  to start",

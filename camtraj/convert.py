@@ -388,6 +388,7 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "timing_mode": take.mode,
         "speed_factor": repr(float(take.speed_factor)),
         "servo_rate_hz": repr(round(float(take.rate), 9)),  # 240.0, not 239.99999999999997
+        "servo_step_ms": json.dumps(take.servo_steps_ms),
         "max_speed": repr(float(take.report.max_speed)),
         "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
@@ -482,7 +483,7 @@ def summary(
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": round(float(take.rate), 9),  # 250.0, not 249.99999999999977
         # an optimal retime cuts each frame interval into its own equal steps: they vary
-        "servo_step_ms": [round(1e3 * float(step), 6) for step in _step_range(take.t)],
+        "servo_step_ms": list(take.servo_steps_ms),
         "duration": float(take.duration),
         "shot_start": float(take.shot_start),
         "shot_end": float(take.shot_end),
@@ -499,12 +500,6 @@ def summary(
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }
-
-
-def _step_range(t: Array) -> tuple[float, float]:
-    """Shortest and longest step [s] between the take's servo samples."""
-    steps = np.diff(t)
-    return (float(steps.min()), float(steps.max())) if steps.size else (0.0, 0.0)
 
 
 def _move_to_start(path: PathSolution) -> dict[str, Any]:

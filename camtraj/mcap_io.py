@@ -1500,8 +1500,9 @@ def describe(path: str | Path) -> dict[str, Any]:
     Returns:
         Keys: ``path``, ``size_bytes``, ``profile``, ``library``, ``source_file``,
         ``camera_prim`` (from the metadata, or None), ``frames`` (count, first, last),
-        ``duration_s``, ``servo_rate_hz``, ``frame_rate_hz``, ``topics`` (list of topic,
-        type, count), ``limits`` (the robot's joint names and limits, or None),
+        ``duration_s``, ``servo_rate_hz``, ``servo_step_ms`` (shortest and longest step [ms],
+        None in files written before convert recorded it), ``frame_rate_hz``, ``topics``
+        (list of topic, type, count), ``limits`` (the robot's joint names and limits, or None),
         ``peak_use`` (axis -> quantity -> fraction of the limit the shot used, or None for
         files that do not record it), ``position_range`` (axis -> [min, max] over the shot
         [m, rad], or None), ``metadata`` (the ``camtraj`` record).
@@ -1573,6 +1574,7 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
         },
         "duration_s": duration,
         "servo_rate_hz": servo_rate,
+        "servo_step_ms": _json_or_none(take_md.get("servo_step_ms")),
         "frame_rate_hz": frame_rate,
         "topics": topics,
         "limits": limits,

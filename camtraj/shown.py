@@ -12,7 +12,7 @@ import math
 from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["EDGE_QUANTITIES", "edge_use", "percent", "seconds", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "edge_use", "percent", "seconds", "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -31,6 +31,20 @@ def seconds(x: float, digits: int = 2) -> str:
         return "-"
     exact = Decimal(f"{x:.6f}").quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP)
     return f"{exact:.{digits}f}"
+
+
+def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:
+    """The take's servo grid: 'servo 250.0 Hz', or where an optimal retime's steps differ,
+    their range (each frame interval is cut into equal steps: not a fixed period).
+    ``step_ms``: the shortest and longest step [ms], None when not known (the rate alone)."""
+    if step_ms is not None:
+        short, long = step_ms
+        if long - short > 1e-6 * long:
+            return (f"servo steps {short:.3f}-{long:.3f} ms (each frame interval in equal "
+                    "steps, every frame a sample: not a fixed period)")
+        if long > 0.0:
+            rate_hz = 1e3 / long
+    return f"servo {rate_hz:.1f} Hz"
 
 
 def speed_percent(x: float) -> str:

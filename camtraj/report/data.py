@@ -72,6 +72,8 @@ class ReportData:
             ``"unreachable"`` (frames the robot cannot reach). message: Why not (one line).
         timing: Timing mode. speed_factor: Take duration of the shot / its own duration.
         servo_rate_hz: Servo rate. fps: Film frame rate.
+        servo_step_ms: The shortest and longest servo step [ms] (they differ in an optimal
+            retime); None when not known (a file written before convert recorded them).
         max_speed: Maximum feasible speed as a fraction of real time (nan: not known).
         placement: How the base was placed (text). base2world: The placement, (4, 4).
         joint_names: Axis names (8,). revolute: Whether each axis is revolute, (8,).
@@ -130,6 +132,7 @@ class ReportData:
     margins: dict[str, Any] | None = None  # convert's margins_summary
     # "runup"/"runout" -> axis -> quantity -> fraction of the limit
     edges: dict[str, dict[str, dict[str, float]]] | None = None
+    servo_step_ms: tuple[float, float] | None = None
 
     def limit(self, quantity: str) -> Array:
         """The symmetric limit of velocity, acceleration or jerk, shape (8,)."""
@@ -277,7 +280,8 @@ def from_analysis(
         data = ReportData(
             **common, status="ok", message="", timing=take.mode,
             speed_factor=float(take.speed_factor), servo_rate_hz=float(take.rate),
-            max_speed=float(take.report.max_speed), samples=samples,
+            servo_step_ms=take.servo_steps_ms, max_speed=float(take.report.max_speed),
+            samples=samples,
             frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
             tolerance=LIMIT_RTOL,
@@ -426,6 +430,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         warnings = json.loads(md.get("warnings", "[]"))
         margins = json.loads(md["margins"]) if "margins" in md else None  # older files: none
         edges = json.loads(md["edge_peak_use"]) if "edge_peak_use" in md else None
+        steps = json.loads(md["servo_step_ms"]) if "servo_step_ms" in md else None
     except ValueError as exc:
         msg = f"{where} cannot be read ({exc})"
         raise InputError(msg) from None
@@ -439,6 +444,10 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         raise InputError(msg)
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         msg = f"{where} warnings must be a list of texts"
+        raise InputError(msg)
+    if steps is not None and not (isinstance(steps, list) and len(steps) == 2 and all(
+            isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in steps)):
+        msg = f"{where} servo_step_ms must be the shortest and longest step [ms], two numbers"
         raise InputError(msg)
     for key in ("fps", "servo_rate_hz", "speed_factor"):
         value = _float(md.get(key))
@@ -479,6 +488,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         camera_path=take.target[:, :3, 3].copy(), camera_look=-take.target[:, :3, 2],
         poses=poses, pose_frames=pose_frames, track=track, warnings=tuple(warnings),
         tolerance=MCAP_RTOL, source=str(source), margins=margins, edges=edges,
+        servo_step_ms=None if steps is None else (float(steps[0]), float(steps[1])),
     )
     return _with_violations(data)
 

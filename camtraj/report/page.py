@@ -15,7 +15,7 @@ from camtraj.errors import frame_ranges
 from camtraj.report.data import ReportData
 from camtraj.report.plots import COLORS, figures, limit_text
 from camtraj.report.samples import QUANTITIES
-from camtraj.shown import EDGE_QUANTITIES, edge_use, percent, seconds, speed_percent
+from camtraj.shown import EDGE_QUANTITIES, edge_use, percent, seconds, servo, speed_percent
 
 # ---------------------------------------------------------------------------------------------
 # The page
@@ -71,7 +71,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
     if s is not None:
         rows += [
             ("speed factor", f"{data.speed_factor:.3f} (shot duration in the take / its own)"),
-            ("servo rate", f"{data.servo_rate_hz:.1f} Hz"),
+            ("servo", servo(data.servo_rate_hz, data.servo_step_ms).removeprefix("servo ")),
             ("take", f"{seconds(s.end - s.start)} s; shot "
                      f"{seconds(data.shot_start)}-{seconds(data.shot_end)} s"),
         ]

@@ -153,6 +153,13 @@ class Take:
         """Length of the whole take [s]."""
         return float(self.t[-1])
 
+    @property
+    def servo_steps_ms(self) -> tuple[float, float]:
+        """The shortest and longest step between servo samples [ms], to the nanosecond."""
+        steps = np.diff(self.t)
+        short, long = (float(steps.min()), float(steps.max())) if steps.size else (0.0, 0.0)
+        return round(1e3 * short, 6), round(1e3 * long, 6)
+
 
 
 def time_shot(
