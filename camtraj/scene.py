@@ -4,7 +4,9 @@
 for every shot (:func:`camtraj.place.search` over all of them): every shot reachable, then the
 largest worst-shot maximum feasible speed, the margins as the tie-break. Where no single
 placement serves every shot, the smallest split is proposed: the fewest groups of shots that
-each share a placement (searched group by group, the cheap tests ruling out most groups).
+each share a placement (searched group by group, the cheap tests ruling out most groups),
+unless one of the groups' placements serves every shot after all (the whole scene's search
+solves only its finalists on every frame, and can miss it: :func:`serving_everyone`).
 
 The scene file (TOML; paths relative to it)::
 
@@ -41,6 +43,7 @@ from camtraj.options import TIMING_MODES, ConvertOptions
 from camtraj.place import (
     Layout,
     Problem,
+    _race,
     _Runner,
     columns,
     default_jobs,
@@ -257,7 +260,10 @@ def place_scene(
 
             split = smallest_split(len(shots), cheap, lambda g: _best_ok(group_search, g),
                                    known={everyone: None})
-            if split is None:
+            one = None if split is None else serving_everyone(runner, split, everyone)
+            if one is not None:  # a group's placement serves the whole scene after all
+                layout, reason, split = one, "", None
+            elif split is None:
                 msg = _no_split(shots, group_search, cheap)
                 raise PlacementError(msg)
     finally:
@@ -265,6 +271,23 @@ def place_scene(
     return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,
                        runner.count, screened, time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
+
+
+def serving_everyone(runner: Any, split: list[tuple[tuple[int, ...], Layout]],
+                     everyone: tuple[int, ...]) -> Layout | None:
+    """The best of a split's placements that serves every shot of the scene, or None.
+
+    The whole scene's search races its placements on a subsample of each shot's frames and
+    solves only its finalists on every frame, so it can miss a placement that a group's
+    search finds: each group's placement (its own shots already solved on every frame) is
+    solved for the other shots, best bound first (``runner``: :class:`camtraj.place._Runner`).
+    """
+    tries = [Layout(lay.x, lay.y, lay.yaw_deg,
+                    (*(i for i in everyone if i not in group), *group), dict(lay.results))
+             for group, lay in split]
+    _race(runner, tries, dict.fromkeys(everyone, 1), 1)
+    good = [t for t in tries if t.ok]
+    return max(good, key=Layout.rank) if good else None
 
 
 def _no_repeats(shots: Sequence[SceneShot]) -> None:

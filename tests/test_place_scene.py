@@ -344,6 +344,43 @@ def test_the_race_keeps_the_best_layouts_of_a_brute_force_whatever_the_jobs() ->
         assert len(kept) == 1, (need, kept)  # the same placements whatever the jobs
 
 
+def test_a_groups_placement_that_serves_every_shot_replaces_the_split() -> None:
+    """A split is proposed only when none of its groups' placements serves the whole scene:
+    each is solved, on every frame, for the shots it was not searched for (made-up solve
+    results; the scene's search can miss such a placement: a new user's three shots)."""
+    from camtraj.place import Layout, Result
+    from camtraj.scene import serving_everyone
+
+    def result(shot: int, x: float, speed: float) -> Result:
+        return Result(x, 0.0, 0.0, True, 1.0, True, speed >= 1.0, speed, "")
+
+    # speed of shot i with the base at x: groups (0, 2) searched at x = 1, (1,) at x = 2
+    for shot2_at_1, serving in ((4.0, 1.0), (0.9, None)):
+        speeds = {(1.0, 0): 1.5, (1.0, 1): 2.0, (1.0, 2): shot2_at_1,
+                  (2.0, 0): 0.5, (2.0, 1): 3.0, (2.0, 2): 1.2}
+
+        class Runner:
+            def __init__(self, speeds: dict[tuple[float, int], float]) -> None:
+                self.jobs, self.count, self.speeds = 1, 0, speeds
+
+            def run(self, tasks: list[tuple[int, float, float, float, int]]) -> list[Result]:
+                assert all(stride == 1 for *_, stride in tasks)  # every frame
+                self.count += len(tasks)
+                return [result(i, x, self.speeds[(x, i)]) for i, x, _y, _yaw, _ in tasks]
+
+        split = [((0, 2), Layout(1.0, 0.0, 0.0, (0, 2), {i: result(i, 1.0, speeds[(1.0, i)])
+                                                        for i in (0, 2)})),
+                 ((1,), Layout(2.0, 0.0, 0.0, (1,), {1: result(1, 2.0, 3.0)}))]
+        runner = Runner(speeds)
+        one = serving_everyone(runner, split, (0, 1, 2))  # type: ignore[arg-type]
+        if serving is None:
+            assert one is None
+        else:
+            assert one is not None and one.ok and sorted(one.results) == [0, 1, 2]
+            assert one.x == serving and one.key()[3] == 150  # the worst shot: 150%
+        assert runner.count <= 3  # only the shots the groups' searches had not solved
+
+
 def test_the_scene_search_takes_the_same_steps_whatever_the_jobs(
         scene: dict[str, Any], robot: Robot) -> None:
     """The whole coarse-to-fine search of a scene over the real shots' cheap tests, with
