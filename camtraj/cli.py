@@ -13,6 +13,7 @@ import logging
 import logging.handlers
 import math
 import os
+import shlex
 import signal
 import sys
 import warnings
@@ -521,6 +522,8 @@ def _report(r: dict[str, Any]) -> str:
             amount = (f"{u['miss']:.3f} m" if u["miss_unit"] == "m"
                       else f"{math.degrees(u['miss']):.1f} deg")
             lines.append(f"  {u['frame']:>5}  {amount:>10}  {u['reason']}")
+        lines.append(f"  note: camtraj place {shlex.quote(r['shot'])} looks for a track "
+                     "placement that reaches every frame")
         return "\n".join(lines)
     if r["status"] == "collision":
         return f"{r['shot']}: COLLISION\n  {r['message']}"

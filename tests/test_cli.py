@@ -283,6 +283,9 @@ def test_check_unreachable_names_frames_and_misses_and_exits_3(
     proc = cli.procs["check_unreachable"]
     assert proc.returncode == 3, proc.stderr
     assert "29-46" in proc.stdout, proc.stdout
+    # where to go next: the last line names the command that places the track
+    assert proc.stdout.splitlines()[-1] == (f"  note: camtraj place {UNREACHABLE} looks for a "
+                                            "track placement that reaches every frame")
     _assert_wrote_nothing(cli, "check_unreachable")
 
     json_proc = cli.procs["check_unreachable_json"]
