@@ -30,6 +30,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import json
+import logging
 import math
 import multiprocessing
 import os
@@ -341,6 +342,8 @@ def _convert_one(
     """
     start = time.perf_counter()
     cpu_start = time.process_time()
+    held = _ShotWarnings()  # said by the batch if the shot converts, dropped if it fails
+    logging.getLogger().addHandler(held)
     interrupts.install()  # before looking at the stop: a stop sent before this is seen there
     try:
         if _stop is not None and _stop.is_set():
@@ -380,12 +383,24 @@ def _convert_one(
             "error": "Interrupted",
         }
     else:
-        outcome = {"status": "ok", "summary": summary}
+        outcome = {"status": "ok", "summary": summary, "warnings": held.texts}
     finally:
         interrupts.ignore()
+        logging.getLogger().removeHandler(held)
     outcome["seconds"] = time.perf_counter() - start
     outcome["cpu_seconds"] = time.process_time() - cpu_start
     return outcome
+
+
+class _ShotWarnings(logging.Handler):
+    """A worker's log messages during one shot (warnings and above), held until it ends."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.texts: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.texts.append(record.getMessage())
 
 
 _stop: Any = None
@@ -632,6 +647,9 @@ def run_batch(
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
+                    if not future.exception():  # a converted shot's warnings, as convert's
+                        for text in future.result().get("warnings", ()):
+                            bar.write(text, file=sys.stderr)
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)
             except KeyboardInterrupt as exc:

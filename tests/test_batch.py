@@ -224,6 +224,25 @@ def test_a_bad_shared_file_is_one_error_before_any_shot_runs(tmp_path: Path,
     assert not out.exists()
 
 
+def test_a_shots_warnings_are_said_only_when_it_converts(tmp_path: Path) -> None:
+    """As convert: a converted shot's warnings go to stderr, a failed shot says only its
+    ERROR line (a shot with no camera also printed its missing-metersPerUnit warning)."""
+    text = (SAMPLES / "maya_dolly_push_in.usda").read_text()
+    assert "metersPerUnit = 0.01" in text
+    unit_less = text.replace("metersPerUnit = 0.01", "")  # USD's fallback: centimetres too
+    (tmp_path / "converts.usda").write_text(unit_less)
+    no_camera = unit_less.split("def Camera")[0]  # the header alone
+    assert "Camera" not in no_camera
+    (tmp_path / "no_camera.usda").write_text(no_camera)
+    shots = [str(tmp_path / "converts.usda"), str(tmp_path / "no_camera.usda")]
+    proc = _run("batch", *shots, "-o", str(tmp_path / "out"), "--jobs", "2", "-q")
+    assert proc.returncode == 2, proc.stderr
+    said = [line for line in proc.stderr.splitlines() if "metersPerUnit" in line]
+    assert said == [f"{shots[0]}: metersPerUnit is not authored; using USD's fallback 0.01 "
+                    "(centimetres)"], proc.stderr
+    assert f"ERROR: {shots[1]}: no camera" in proc.stderr
+
+
 def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) -> None:
     """Run where a folder named camtraj sits (a clone of this repository, an output folder):
     the workers import the installed package, not that folder (every worker failed, and the
