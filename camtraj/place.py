@@ -591,7 +591,14 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
                 layouts.append(lay)
         _race(runner, layouts, strides, need)
     finalists = _distinct(_ranked(layouts), finals)
-    full = [Layout(r.x, r.y, r.yaw_deg, r.worst_first()) for r in finalists]
+    # solved on every frame where they are printed and written: to the millimetre and the
+    # hundredth of a degree (a shot's speed can change with a fraction of a millimetre)
+    laid = np.array([(round(r.x, 3), round(r.y, 3), round(r.yaw_deg, 2)) for r in finalists])
+    fits = floor_ok(robot, laid[:, 0], laid[:, 1], laid[:, 2], scr.region, scr.keep_out)
+    at = [(float(c[0]), float(c[1]), float(c[2])) if fit else (r.x, r.y, r.yaw_deg)
+          for r, c, fit in zip(finalists, laid, fits, strict=True)]
+    full = [Layout(x, y, yaw, r.worst_first()) for (x, y, yaw), r in zip(at, finalists,
+                                                                         strict=True)]
     _race(runner, full, dict.fromkeys(shots, 1), len(full) if single else 1)
     return _ranked(full)[:top], len(scr.grid), scr.info
 
@@ -717,7 +724,7 @@ def table(report: PlaceReport) -> str:
              "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
              "stretch: margins)"]
     for i, r in enumerate(report.results, 1):
-        lines.append(f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.1f}  {columns(r)}")
+        lines.append(f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.2f}  {columns(r)}")
         if not r.ok:
             lines.append(f"     not possible: {r.reason}")
     return "\n".join(lines)

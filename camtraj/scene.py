@@ -411,7 +411,7 @@ HEADER = ("  shot                      speed  binding           limits use  wris
 
 
 def _rows(report: SceneReport, lay: Layout) -> list[str]:
-    lines = [f"  x {lay.x:.3f} m  y {lay.y:.3f} m  yaw {lay.yaw_deg:.1f} deg", HEADER]
+    lines = [f"  x {lay.x:.3f} m  y {lay.y:.3f} m  yaw {lay.yaw_deg:.2f} deg", HEADER]
     for i in sorted(lay.results):
         r = lay.results[i]
         name = report.shots[i].name

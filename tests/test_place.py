@@ -117,6 +117,10 @@ def test_found_placement_is_among_the_best_of_a_brute_force_grid(far: dict[str, 
     assert speeds[0] > 1.0  # the grid holds feasible placements
     best = far["report"]["placements"][0]
     assert in_square(best["x"], best["y"]) and best["yaw_deg"] == pytest.approx(yaw)
+    # where the table prints it (mm, 0.01 deg) is where it was solved and what is written:
+    # a new user's printed placement, typed back in, ran at 228% against the 295% printed
+    shown = (float(f"{best['x']:.3f}"), float(f"{best['y']:.3f}"), float(f"{yaw:.2f}"))
+    assert shown == (best["x"], best["y"], best["yaw_deg"])
     found = brute_force_speed(far["shot"], best["x"], best["y"], best["yaw_deg"])
     assert found == pytest.approx(best["max_speed"], rel=1e-6)
     assert found >= 0.99 * speeds[0], (found, speeds[:5])  # within 1% of the grid's best
