@@ -647,7 +647,7 @@ def run_batch(
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
-                    if not future.exception():  # a converted shot's warnings, as convert's
+                    if result.status == "ok":  # a converted shot's warnings, as convert's
                         for text in future.result().get("warnings", ()):
                             bar.write(text, file=sys.stderr)
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
