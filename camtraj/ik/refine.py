@@ -316,30 +316,34 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
                    + rows[end, 1][:, None] * (d2[end] / cost.acc))
             lo = pad + row + off
             gq[lo:lo + lin.shape[0]] += lin * f1[end]
-            for o1 in range(lin.shape[0]):
-                M[: lin.shape[0] - o1, lo + o1] += lin[o1:] * (lin[o1] * f2[end])
+            first, d = _upper_pairs(lin.shape[0])  # frames lo + first and lo + first + d
+            M[d, lo + first] += lin[first] * lin[first + d] * f2[end]
     # the peak norm's gradient alone: its concave outer root adds -c w w^T to the curvature
     g_peak = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
     concave = (1.0 - 1.0 / p) / max(kappa * phi, 1e-300)
     m = n - 1  # the motion tie-break, mean over steps, through its majorising quadratic
-    if m > 0:
+    if m > 0:  # step k = q[k + 1] - q[k]: frames k and k + 1, with weights -1 and +1
         z = np.diff(q, axis=0) / cost.vel
         t = cost.tie_break / m
         dz = t * cost.motion_coef * np.sign(z) / cost.vel
         w = t * cost.motion_coef / np.maximum(np.abs(z), 0.05) / (cost.vel * cost.vel)
-        step_op = BandOps((1,), (m,), np.tile([[[-1.0], [1.0]]], (m, 1, 1)), 0, (0, m))
-        _gather(step_op, dz[..., None], w[..., None], gq, M, pad)
+        gq[pad:pad + m] -= dz
+        gq[pad + 1:pad + n] += dz
+        M[0, pad:pad + m] += w
+        M[0, pad + 1:pad + n] += w
+        M[1, pad:pad + m] -= w
     g = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
     # H[k, d] = sum_i M[d, k, i] G[k, i]^T G[k + d, i]: frame k with frame k + d, one
     # entry (p, q) at a time over contiguous (d, k, i) arrays
     g_cols = np.zeros((2, n + width, 8))
     g_cols[:, :n] = G.transpose(2, 0, 1)
     H = np.empty((n, width, 2, 2))
+    right = [np.lib.stride_tricks.sliding_window_view(g_cols[col], n, axis=0)[:width]
+             for col in range(2)]  # right[col][d, i, k] = G[k + d, i, col]
     for row in range(2):
         left = M[:, pad:pad + n] * g_cols[row, :n]  # (d, k, i)
         for col in range(2):
-            right = np.lib.stride_tricks.sliding_window_view(g_cols[col], n, axis=0)[:width]
-            H[:, :, row, col] = np.einsum("dki,dik->kd", left, right)
+            H[:, :, row, col] = np.einsum("dki,dik->kd", left, right[col])
     # margins: hinge^2 of z = 1 - d / zone, d the distance to the nearer limit (or the
     # singularity distance itself), the worst frame's through its power mean
     e = cost.intrusion(y)
@@ -418,6 +422,13 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
         for o in range(width):
             gq[f0 + o:f0 + o + count] += taps[:, o]
             M[:, f0 + o:f0 + o + count] += pair_w[:, o].transpose(1, 0, 2)
+
+
+@lru_cache(maxsize=4)
+def _upper_pairs(width: int) -> tuple[IntArray, IntArray]:
+    """Every pair of taps o <= o + d < width, as (o, d) index arrays."""
+    first, second = np.triu_indices(width)
+    return first, second - first
 
 
 def _windows(v: Array, width: int) -> Array:

@@ -73,16 +73,21 @@ def margin_peak(e: Array) -> tuple[float, Array]:
 def powers(a: Array, ex: Array) -> Array:
     """``a ** ex`` for a (..., k) >= 0 and one exponent per column, ex (k,). The
     continuation's exponents are whole numbers (power / order: 6 / 3 = 2, ..., 48 / 1 = 48),
-    taken by repeated squaring, which is several times faster than ``pow`` and as exact; the
-    columns with the same exponent are done at once."""
-    columns = np.moveaxis(a, -1, 0)  # (k, ...)
-    out = np.empty(columns.shape)
-    for e in np.unique(ex):
-        pick = ex == e
-        part = columns[pick]  # a contiguous copy of the columns with this exponent
-        whole = float(e).is_integer() and 0.0 <= e <= 1024.0
-        out[pick] = _whole_power(part, int(e)) if whole else part ** e
-    return np.moveaxis(out, 0, -1)
+    taken by repeated squaring, which is several times faster than ``pow`` and as exact; a
+    run of columns with the same exponent is done at once."""
+    out = np.empty(a.shape)
+    k = ex.shape[0]
+    j = 0
+    while j < k:  # each run of columns with the same exponent at once
+        e = float(ex[j])
+        end = j + 1
+        while end < k and ex[end] == e:
+            end += 1
+        part = a[..., j:end]
+        whole = e.is_integer() and 0.0 <= e <= 1024.0
+        out[..., j:end] = _whole_power(part, int(e)) if whole else part ** e
+        j = end
+    return out
 
 
 def _whole_power(a: Array, e: int) -> Array:
