@@ -202,6 +202,10 @@ def test_where_scale_is_already_optimal_the_take_is_the_scale_take(limits: Limit
     assert take.uniform
     assert np.array_equal(take.q, scale.q)
     assert take.speed_factor == scale.speed_factor == pytest.approx(1.2, rel=1e-6)
+    # and it says so: the take is not the optimal timing it was asked for
+    said = [w for w in take.report.warnings if "--timing optimal found no" in w]
+    assert said and f"uniformly, at {100 / 1.2:.4g}% of real time" in said[0]
+    assert not any("--timing optimal" in w for w in scale.report.warnings)
 
 
 def test_fails_like_scale_where_no_take_fits(limits: Limits) -> None:

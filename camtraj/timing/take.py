@@ -282,7 +282,12 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
-        if retimed is not None:
+        if retimed is None:
+            warnings.append(
+                "--timing optimal found no jerk-limited timing shorter than a uniform one: "
+                f"the take plays the shot uniformly, at {100.0 / speed_factor:.4g}% of real "
+                "time")
+        else:
             shot_t, shot_x, shot, frame_idx = retimed
             del retimed
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
