@@ -38,6 +38,7 @@ from camtraj.inputs import one_line
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon
+from camtraj.shown import TABLE_MAX_SPEED, speed_percent
 from camtraj.timing import Limits, TimingLimitError, time_shot
 
 if TYPE_CHECKING:
@@ -733,7 +734,7 @@ def table(report: PlaceReport) -> str:
 def columns(r: Result) -> str:
     """A result's speed, binding axis, limits use, margins and obstacle distance columns."""
     m = r.margins
-    speed = f"{math.floor(100 * min(r.max_speed, 99.99)):4d}%" if r.max_speed > 0 else "   -"
+    speed = speed_percent(min(r.max_speed, TABLE_MAX_SPEED)) if r.max_speed > 0 else "-"
     obst = m.get("obstacle_m")
     ob = "       -" if obst is None else ("   clear" if not math.isfinite(obst)
                                           else f"{obst:6.2f} m")

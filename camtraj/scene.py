@@ -23,7 +23,6 @@ The scene file (TOML; paths relative to it)::
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -53,6 +52,7 @@ from camtraj.place import (
     with_clearance,
 )
 from camtraj.set_file import SetFile
+from camtraj.shown import TABLE_MAX_SPEED, speed_percent
 
 _SCENE_KEYS = {"name", "set_file", "shot"}
 _SHOT_KEYS = {"path", "camera", "frames", "timing"}
@@ -456,4 +456,4 @@ def split_text(report: SceneReport) -> str:
 
 
 def _speed(speed: float) -> str:
-    return f"{math.floor(100 * min(speed, 99.99))}%" if speed > 0 else "0%"
+    return speed_percent(min(speed, TABLE_MAX_SPEED))

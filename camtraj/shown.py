@@ -12,7 +12,8 @@ import math
 from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["EDGE_QUANTITIES", "edge_use", "percent", "seconds", "servo", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "percent", "seconds", "servo",
+           "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -47,9 +48,19 @@ def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:
     return f"servo {rate_hz:.1f} Hz"
 
 
+TABLE_MAX_SPEED = 99.99
+"""The fastest speed place's tables show (9999%: their column is five wide)."""
+
+
 def speed_percent(x: float) -> str:
-    """The maximum feasible speed as % of real time, rounded down: '206%'."""
-    return f"{math.floor(100.0 * x)}%"
+    """The maximum feasible speed as % of real time, rounded down: '206%'; below 1%, to two
+    significant digits ('0.29%', not '0%')."""
+    p = 100.0 * x
+    if p >= 1.0 or p <= 0.0:
+        return f"{math.floor(p)}%"
+    decimals = 1 - math.floor(math.log10(p))
+    shown = math.floor(p * 10 ** decimals * (1.0 + 1e-12)) / 10 ** decimals  # 0.29, not 0.28999
+    return f"{shown:.{decimals}f}%"
 
 
 def edge_use(runup: Mapping[str, Mapping[str, float]], runout: Mapping[str, Mapping[str, float]],

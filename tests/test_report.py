@@ -602,6 +602,16 @@ def test_durations_and_use_round_one_way() -> None:
     assert percent(0.995) == "100%" and percent(0.994) == "99%" and percent(math.nan) == "-"
 
 
+def test_a_speed_below_one_percent_is_not_shown_as_zero() -> None:
+    """Rounded down (never more than the robot can do), whole percent from 1% up, and two
+    significant digits below (a new user read "0% of real time (could be shot at 0.07 fps)")."""
+    from camtraj.shown import speed_percent
+
+    assert speed_percent(2.069) == "206%" and speed_percent(0.0999) == "9%"
+    assert speed_percent(0.0029) == "0.29%" and speed_percent(0.0023999) == "0.23%"
+    assert speed_percent(0.000123) == "0.012%" and speed_percent(0.0) == "0%"
+
+
 def _ends_cells(page: str) -> dict[str, list[str]]:
     rows = re.findall(r"<td><a href='#axis-(\w+)'>\w+</a></td>(.*?)</tr>", page)
     return {axis: re.findall(r"<td class='num ends'>([^<]+)</td>", row) for axis, row in rows}
