@@ -78,6 +78,17 @@ def test_unreachable_poses_say_by_how_much(robot: Robot) -> None:
     with pytest.raises(UnreachableError) as info:
         solve_ik(robot, T, robot.home)
     assert info.value.miss == pytest.approx(2.0, abs=1e-9)
+    # past the end and to the side at once: the distance to the nearest point within reach
+    # of the shoulder anywhere along the track (a new user's shot 3 m past the end and 24 m
+    # to the side was said to miss by the sideways 24 m alone)
+    T[:3, 3] = (robot.upper[0] + dh.r10 + 3.0, reach + 24.0, dh.r2 + 1.0)
+    shoulders = np.stack([np.linspace(robot.lower[0], robot.upper[0], 20001) + dh.r10,
+                          np.zeros(20001), np.full(20001, dh.r2)], axis=1)
+    nearest = float(np.linalg.norm(shoulders - T[:3, 3], axis=1).min()) - reach
+    with pytest.raises(UnreachableError) as info:
+        solve_ik(robot, T, robot.home)
+    assert info.value.miss == pytest.approx(nearest, abs=1e-6)
+    assert info.value.miss > 24.0 + 0.1
 
 
 def test_unreachable_frames_are_all_listed(robot: Robot) -> None:

@@ -75,11 +75,16 @@ class Region:
         ws_out = math.sqrt((dse_max + dh.r6 * cm) ** 2 + (dh.r6 * sm) ** 2)
         ws_in = math.sqrt((self.r4_lo + dh.r40) ** 2 + (dh.r6 - dh.l3) ** 2)
         perp = math.hypot(self.W[1], self.W[2] - dh.r2)
-        if perp > ws_out:
-            return [], perp - ws_out
+        c = self.W[0] - dh.r10
+        # beyond the farthest reach from every track value: the miss is W's distance from the
+        # shoulder's line segment over the track, less that reach (sideways, past an end, or
+        # both at once)
+        along = max(self.r1_lo - c, c - self.r1_hi, 0.0)
+        outside = math.hypot(along, perp) - ws_out
+        if outside > 0.0:
+            return [], outside
         a_out = math.sqrt(ws_out * ws_out - perp * perp)
         a_in = math.sqrt(max(ws_in * ws_in - perp * perp, 0.0))
-        c = self.W[0] - dh.r10
         out: list[tuple[float, float]] = []
         miss = math.inf
         for lo, hi in ((c - a_out, c - a_in), (c + a_in, c + a_out)):
