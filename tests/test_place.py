@@ -372,3 +372,37 @@ def test_place_times_the_lens_motors_as_convert_does(tmp_path: Path) -> None:
     free = analyse(shot, ConvertOptions(placement=(best["x"], best["y"], 0.0, best["yaw_deg"]),
                                         frames=(1001, 1040), timing="scale"))
     assert free.take is not None and free.take.report.max_speed > 1.5 * best["max_speed"]
+
+
+def test_the_search_races_where_the_track_is_now(robot: Robot, tmp_path: Path) -> None:
+    """The set file's placement (off the search's grid) races with the grid's placements:
+    with made-up solve results fastest exactly there, that is the search's answer (a new
+    user's walk ran at 88% at the stage origin, and place's best was 80%)."""
+    from camtraj.place import Result, current_placement, load_problem, search
+    from camtraj.set_file import SetFile
+
+    shot = write_shot(tmp_path / "move.usda", base_move(robot))
+    here = (0.137, -0.093, 2.71)  # [m, m, deg]: a millimetre and a hundredth as written
+    sf = SetFile.parse(f"[placement]\nx = {here[0]}\ny = {here[1]}\nz = 0.0\n"
+                       f"yaw_deg = {here[2]}\n")
+    assert current_placement(sf) == pytest.approx(here, abs=1e-12)
+    assert current_placement(SetFile()) == (0.0, 0.0, 0.0)  # convert's default
+    problem = load_problem(shot, ConvertOptions(), robot, sf, clearance=None, rate=250.0)[0]
+
+    def result(i: int, x: float, y: float, yaw: float, stride: int) -> Result:
+        there = max(abs(x - here[0]), abs(y - here[1]), abs(yaw - here[2])) < 1e-9
+        speed = 2.0 if there else 1.0 + 0.1 * math.cos(3.0 * x + y + 0.05 * yaw)
+        return Result(x, y, yaw, stride == 1, 1.0, True, True, speed, "",
+                      {"limits_use": 0.5, "wrist_deg": 30.0, "stretch_deg": 40.0})
+
+    class Runner:
+        problems, jobs, count = (problem,), 1, 0
+
+        def run(self, tasks: list[tuple[int, float, float, float, int]]) -> list[Result]:
+            return [result(*t) for t in tasks]
+
+    layouts, _, _ = search(Runner(), (0,), sf, meters_per_unit=1.0,  # type: ignore[arg-type]
+                           up_axis="Z", top=3)
+    best = layouts[0].results[0]
+    assert (best.x, best.y, best.yaw_deg) == pytest.approx(here, abs=1e-9)
+    assert best.max_speed == 2.0
