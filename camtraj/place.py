@@ -2,8 +2,9 @@
 
 The search is over the robot base's x, y and yaw about up on the floor (z is the set file's
 floor height). Placements rank by: every frame reachable, no collision with the set's
-obstacles, feasible at the shot's own timing, then the largest maximum feasible speed (to 1 %),
-then the largest margins (position limits, wrist singularity, full stretch).
+obstacles, feasible with the timing asked (``--timing``: at the shot's own unless scale or
+optimal), then the largest maximum feasible speed (to 1 %), then the largest margins
+(position limits, wrist singularity, full stretch).
 
 1. Cheap tests first, on every candidate of a coarse grid at once: the camera path against the
    robot's reach envelope (a solid of revolution about the rotate axis, swept along the track),
@@ -35,6 +36,7 @@ from numpy.typing import NDArray
 from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
 from camtraj.ik import PathSolution, solve_path_report
 from camtraj.inputs import one_line
+from camtraj.options import TIMING_MODES
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon
@@ -98,7 +100,7 @@ class Result:
     full: bool
     reachable: float  # fraction of the solved frames reached
     collision_free: bool
-    feasible: bool  # at the shot's own timing
+    feasible: bool  # with the timing asked (at the shot's own, unless scale or optimal)
     max_speed: float
     binding: str
     margins: dict[str, float] = field(default_factory=dict)
@@ -711,6 +713,7 @@ def place(
     progress: bool = False,
     top: int = 3,
     lens: str | None = None,
+    timing: str = "shot",
 ) -> PlaceReport:
     """Search the placement of the robot for a shot (see the module docstring).
 
@@ -730,7 +733,8 @@ def place(
     require_regular_files(shot_path, options)
     rob = load_robot(options)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
-    problem, shot = load_problem(shot_path, options, rob, sf, clearance=clearance, rate=rate)
+    problem, shot = load_problem(shot_path, options, rob, sf, clearance=clearance, rate=rate,
+                                 timing=timing)
     runner = _Runner((problem,), jobs, progress)
     try:
         layouts, screened, region = search(runner, (0,), sf,
@@ -793,6 +797,10 @@ def columns(r: Result) -> str:
 @click.option("--lens", type=click.Path(exists=True, dir_okay=False), metavar="LENS.toml",
               help="Lens file: its zoom, focus and iris motors are timed with the joints, as "
                    "convert --lens times them (default: the robot file's [lens], if any).")
+@click.option("--timing", type=click.Choice(TIMING_MODES), default=None,
+              help="How the shots will be converted: a placement where a shot fits only "
+                   "slowed down serves it with scale or optimal (default: shot, each at its own "
+                   "timing; with --scene, the scene file gives each shot's).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes (default: the number of CPUs).")
 @click.option("--top", type=click.IntRange(1, 20), default=3, show_default=True,
@@ -806,8 +814,8 @@ def columns(r: Result) -> str:
 def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | None,
                   robot: str | None, set_file: str | None, camera: str | None,
                   frames: str | None, clearance: float | None, lens: str | None,
-                  jobs: int | None, top: int, as_json: bool, output: str | None,
-                  quiet: bool) -> None:
+                  timing: str | None, jobs: int | None, top: int, as_json: bool,
+                  output: str | None, quiet: bool) -> None:
     """Find where to lay the track for SHOT: the robot base's x, y and yaw on the floor.
 
     Prints the best placements (x, y, yaw, maximum feasible speed, the axis that limits it,
@@ -837,9 +845,9 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                 from camtraj.scene import Scene, SceneShot
 
                 if scene is not None:
-                    if camera is not None or frames is not None:
-                        raise click.UsageError("with --scene, give --camera and --frames per "
-                                               "shot in the scene file")
+                    if camera is not None or frames is not None or timing is not None:
+                        raise click.UsageError("with --scene, give --camera, --frames and "
+                                               "--timing per shot in the scene file")
                     parsed = Scene.read(scene)
                     if parsed.set_file is not None and set_file is not None:
                         raise click.UsageError("the scene file names a set file; give "
@@ -848,7 +856,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                     members = list(parsed.shots)
                     layout_name = parsed.name or Path(scene).stem
                 else:
-                    members = [SceneShot(s, camera, span) for s in shots]
+                    members = [SceneShot(s, camera, span, timing or "shot") for s in shots]
                     layout_name = Path(output).stem if output is not None else "scene"
             if output is not None:  # checked before the search, like every command's outputs
                 outputs.add(output, "-o")
@@ -860,7 +868,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
             if layout_name is None:
                 report = place(shots[0], robot=robot, set_file=set_file, camera=camera,
                                frames=span, clearance=clearance, jobs=jobs,
-                               progress=progress, top=top, lens=lens)
+                               progress=progress, top=top, lens=lens, timing=timing or "shot")
             else:
                 _place_scene(ctx, outputs, members, layout_name, robot=robot,
                              set_file=set_file, clearance=clearance, jobs=jobs,
@@ -872,8 +880,11 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
         click.echo(json.dumps(report.to_json(), indent=2) if as_json else table(report))
         best = report.best
         if not best.ok:
-            click.echo(f"ERROR: no placement can do the shot as asked; the best: {best.reason}",
-                       err=True)
+            slower = (" (--timing scale takes a placement where it fits slowed down)"
+                      if best.reachable == 1.0 and best.collision_free and not best.feasible
+                      else "")
+            click.echo(f"ERROR: no placement can do the shot as asked; the best: {best.reason}"
+                       f"{slower}", err=True)
             ctx.exit(3)
         if output is not None:
             text = to_toml(best.base2world(report.base_z), report.set_file.raw)

@@ -406,3 +406,28 @@ def test_the_search_races_where_the_track_is_now(robot: Robot, tmp_path: Path) -
     best = layouts[0].results[0]
     assert (best.x, best.y, best.yaw_deg) == pytest.approx(here, abs=1e-9)
     assert best.max_speed == 2.0
+
+
+def test_place_with_scale_timing_takes_a_placement_where_the_shot_fits_slowed_down(
+        tmp_path: Path) -> None:
+    """A whip pan no placement runs at real time (25%): `place --timing scale` proposes one
+    anyway, and convert --timing scale takes it at the speed printed; --timing is per shot in a
+    scene file, so --scene with --timing is a usage error (a new user asked for this)."""
+    shot = Path(__file__).resolve().parents[1] / "samples" / "shots" / "whip_pan.usda"
+    placed = tmp_path / "placed.toml"
+    proc = run("place", shot, "--frames", "12:28", "--timing", "scale", "--json", "-j", "2",
+               "-o", placed)
+    assert proc.returncode == 0, proc.stderr
+    best = json.loads(proc.stdout)["placements"][0]
+    assert best["ok"] and best["full"] and 0.0 < best["max_speed"] < 1.0
+    out = tmp_path / "whip.mcap"
+    proc = run("convert", shot, "--frames", "12:28", "--set-file", placed, "--timing", "scale",
+               "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    take = read_take(out)
+    assert take.metadata["timing_mode"] == "scale"
+    assert float(take.metadata["max_speed"]) == pytest.approx(best["max_speed"], rel=1e-6)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f'[[shot]]\npath = "{shot}"\n', encoding="utf-8")
+    proc = run("place", "--scene", scene, "--timing", "scale")
+    assert proc.returncode == 2 and "--timing per shot in the scene file" in proc.stderr
