@@ -62,6 +62,17 @@ def _synthetic() -> dict[str, tuple[Array, float]]:
     q[:, ROTATE] += 0.6 * np.sin(2 * np.pi * t / 4.0) * np.exp(-t / 6.0)
     q[:, 5] += 0.4 * np.sin(2 * np.pi * t / 3.0)
     out["long, several windows"] = (q, FPS)
+    # A quick pan at the start (it sets the uniform take's speed), then a slow track push
+    # easing to rest at the end: the windows in between run several times faster than the
+    # end may, and the last window must still reach it (it had no answer: the take fell back
+    # to the uniform one).
+    t = frame_times(200, 50.0)
+    q = np.tile(HOME, (t.size, 1))
+    w = np.clip(t / 0.5, 0, 1)
+    q[:, 5] += 0.6 * (w - np.sin(2 * np.pi * w) / (2 * np.pi))
+    u = np.clip((t - (t[-1] - 1.2)) / 1.2, 0, 1)
+    q[:, TRACK] += 0.15 * np.minimum(t, t[-1] - 1.2) + 0.15 * 1.2 * (u - u**2 / 2)
+    out["easy stretch easing to rest"] = (q, 50.0)
     # Three frames only.
     q = np.tile(HOME, (3, 1))
     q[:, ROTATE] += [0.0, 0.05, 0.12]
@@ -206,6 +217,17 @@ def test_where_scale_is_already_optimal_the_take_is_the_scale_take(limits: Limit
     said = [w for w in take.report.warnings if "--timing optimal found no" in w]
     assert said and f"uniformly, at {100 / 1.2:.4g}% of real time" in said[0]
     assert not any("--timing optimal" in w for w in scale.report.warnings)
+
+
+def test_the_last_window_reaches_a_slow_end(
+        takes: dict[str, tuple[Array, Take, Take]]) -> None:
+    """The windows before the shot's end are kept slow enough to reach it: the easy stretch
+    runs over twice as fast as the uniform take (which the quick pan at its start holds
+    back), not the uniform take with a warning."""
+    _, take, scale = takes["easy stretch easing to rest"]
+    assert not take.uniform
+    assert not any("--timing optimal found no" in w for w in take.report.warnings)
+    assert take.speed_factor < 0.5 * scale.speed_factor
 
 
 def test_fails_like_scale_where_no_take_fits(limits: Limits) -> None:

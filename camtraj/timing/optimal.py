@@ -88,6 +88,9 @@ LP_SLACK = 1e-6
 #: slow-down), those places are added to the programs, at most REPAIRS times.
 REPAIR_ABOVE = 1e-2
 REPAIRS = 2
+#: The share of the acceleration limit the windows' ends assume for slowing down to the
+#: shot's end (:func:`_braking`).
+BRAKING_SHARE = 0.5
 #: Long stretches are solved in windows of this many frames, each looking this many
 #: frames further ahead.
 WINDOW = 48
@@ -283,7 +286,7 @@ def _solve_stretch(
     stretch is removed by slowing the whole law uniformly.
     """
     shot_start, shot_end = a == 0, b == path.n - 1
-    safe = _safe_speeds(path, a, b, limits, u_scale)
+    safe = _safe_speeds(path, a, b, limits, u_scale, end=1.0 if shot_end else None)
     k = KNOTS_PER_FRAME
     start = min(1.0, float(safe[0])) if shot_start or shot_end else float(safe[0])
     coef = np.full((b - a) * k + 3, start)
@@ -314,7 +317,10 @@ def _solve_stretch(
         coef[(s - a) * k : (e - a) * k + 3] = window
         if last:
             break
-        coef[(e - a) * k + 3 :] = window[-1]
+        # what it ends in, no faster than the frames after it allow
+        tail = np.arange((e - a) * k + 3, coef.size)
+        coef[tail] = np.minimum(window[-1], np.interp(a + (tail - 1.0) / k,
+                                                      np.arange(a, b + 1), safe))
         s += WINDOW
     law = _TimeLaw(a, b, coef * u_scale)
     factor, _ = _overshoot(path, law, limits)
@@ -349,9 +355,11 @@ def _scp(rows: _Rows, coef: Array) -> Array | None:
     return best
 
 
-def _safe_speeds(path: FramePath, a: int, b: int, limits: Limits, u_scale: float) -> Array:
+def _safe_speeds(path: FramePath, a: int, b: int, limits: Limits, u_scale: float,
+                 end: float | None = None) -> Array:
     """Per frame a..b, the highest constant ``u`` (units of u_scale) that fits every point
-    of the programs from that frame to b, (b - a + 1,)."""
+    of the programs from that frame to b, (b - a + 1,); with ``end``, also no faster than
+    braking to ``u <= end`` at b allows (:func:`_braking`)."""
     xs = a + np.arange((b - a) * POINTS_PER_FRAME + 1) / POINTS_PER_FRAME
     _, p1, p2, p3 = path.at(xs, 3)
     knots = np.arange(a + 1, b + 1)
@@ -364,7 +372,39 @@ def _safe_speeds(path: FramePath, a: int, b: int, limits: Limits, u_scale: float
             axis=1) / u_scale
     cap = np.minimum(cap, SPEED_RANGE[1] ** 2)
     suffix = np.minimum.accumulate(cap[::-1])[::-1]
+    if end is not None:
+        suffix = np.minimum(suffix, _braking(p1, p2, p3, limits, u_scale, end))
     out: Array = suffix[::POINTS_PER_FRAME]
+    return out
+
+
+def _braking(p1: Array, p2: Array, p3: Array, limits: Limits, u_scale: float,
+             end: float) -> Array:
+    """Per point (evenly spaced, :data:`POINTS_PER_FRAME` per frame), the highest ``u`` from
+    which the path can still slow to ``u <= end`` at the last point: integrated backwards
+    with the strongest slowing, ``u' < 0``, that every axis allows at :data:`BRAKING_SHARE`
+    of its limits: acceleration ``|2 p2 u + p1 u'| <= A`` and, without ``u''``, jerk
+    ``|2 p3 u + 3 p2 u'| <= J / sqrt(2 u)`` (what binds where the path itself eases out:
+    p1 small, p2 not). The windows' ends are kept under it, so the last window can reach
+    the shot's end slow enough (a new user's push-in sped up to 24x its end's cap two
+    windows before the end, and the last window had no answer)."""
+    h = 1.0 / POINTS_PER_FRAME
+    acc = BRAKING_SHARE * limits.acceleration / u_scale
+    jerk = BRAKING_SHARE * limits.jerk / u_scale
+    a1, a2, a3 = np.abs(p1), np.abs(p2), np.abs(p3)
+    out = np.empty(p1.shape[0])
+    out[-1] = end
+    top = SPEED_RANGE[1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for j in range(p1.shape[0] - 2, -1, -1):
+            u, i = out[j + 1], j + 1
+            # how fast u may fall per unit x at point i, by each axis's acceleration and jerk
+            by_acc = np.where(a1[i] > 1e-12, (acc - 2.0 * p2[i] * u * np.sign(p1[i])) / a1[i],
+                              np.inf)
+            room = jerk / math.sqrt(2.0 * u * u_scale) - 2.0 * a3[i] * u
+            by_jerk = np.where(a2[i] > 1e-12, np.maximum(room, 0.0) / (3.0 * a2[i]), np.inf)
+            fall = float(np.minimum(by_acc, by_jerk).min())
+            out[j] = top if not math.isfinite(fall) else min(top, u + h * max(fall, 0.0))
     return out
 
 
