@@ -63,10 +63,9 @@ typecheck: $(STAMP)
 	$(BIN)/mypy camtraj
 
 # The suite on every core (pytest-xdist), a test file per worker: module fixtures such as
-# the shot set's solves run once. Files go out in collection order, the longest first
-# (tests/conftest.py), not xdist's most-tests-first.
+# the shot set's solves run once.
 unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
-	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder $(ARGS)
+	$(BIN)/pytest -n auto --dist loadfile $(ARGS)
 
 # Headless Chromium renders the HTML report in the tests (they skip, saying so, without it).
 # Idempotent: installs the Debian package only when no chromium is on the PATH. `make test`

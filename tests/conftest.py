@@ -157,15 +157,3 @@ def snapshot(folder: Path) -> dict[str, bytes]:
 def limits(robot: Robot) -> Limits:
     """The default robot's limits as the timing stage reads them."""
     return Limits.from_robot(robot)
-
-
-#: The test files that take longest (minutes of solving), started first: pytest-xdist hands
-#: out whole files in collection order (``make unit`` passes --no-loadscope-reorder), and a
-#: long file started last runs alone on one core while the other idles.
-LONGEST_FIRST = ("test_shot_set.py", "test_place_scene.py", "test_place.py", "test_batch.py",
-                 "test_report_memory.py")
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep
