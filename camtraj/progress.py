@@ -94,7 +94,10 @@ class TerminalProgress:
             if self._bar is not None:
                 self._bar.close()
             counted = total is not None and total > 0
-            self._bar = tqdm(
+            # Made without drawing (a long delay), drawn only once it is ours to close: a stop
+            # (Ctrl-C) inside the constructor after it drew would leave a bar nothing clears,
+            # and the ERROR line would run on after it.
+            bar = tqdm(
                 total=total if counted else None,
                 desc=f"{self.label}: {name}",
                 unit=unit,
@@ -103,8 +106,11 @@ class TerminalProgress:
                 dynamic_ncols=True,
                 mininterval=self.refresh_s,
                 bar_format=_COUNTED if counted else _UNCOUNTED,
+                delay=1e9,
             )
-            self._bar.refresh()
+            self._bar = bar
+            bar.delay = 0.0  # from here drawn as usual, and cleared by close
+            bar.refresh()
         if self._thread is None:
             self._thread = threading.Thread(target=self._redraw, name="camtraj-progress",
                                             daemon=True)

@@ -20,6 +20,7 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pxr import Usd
@@ -239,6 +240,32 @@ def test_terminal_progress_redraws_a_silent_stage_and_clears_the_line() -> None:
     progress.stage("late")
     progress.advance(1)
     assert len(out.getvalue()) == length  # nothing after close
+
+
+def test_a_stop_as_a_stage_starts_leaves_no_bar_behind(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C as a stage's bar is first drawn: the line is still cleared, so the ERROR line
+    that follows stands alone (it ran on after a bar left behind, on a busy machine)."""
+    import tqdm
+
+    out = io.StringIO()
+    progress = TerminalProgress("shot.usda", stream=out, refresh_s=60.0)
+    progress.stage("read")
+    draw = tqdm.tqdm.refresh
+
+    def stopped_while_drawing(bar: Any, *args: Any, **kwargs: Any) -> Any:
+        result = draw(bar, *args, **kwargs)
+        if "solve" in str(bar.desc):
+            raise KeyboardInterrupt
+        return result
+
+    monkeypatch.setattr(tqdm.tqdm, "refresh", stopped_while_drawing)
+    with pytest.raises(KeyboardInterrupt):
+        progress.stage("solve", 1440, unit="frame")
+    monkeypatch.setattr(tqdm.tqdm, "refresh", draw)
+    progress.close()
+    text = out.getvalue()
+    assert "shot.usda: solve" in text  # it was drawn
+    assert text.split("\r")[-1].strip() == ""  # and cleared: nothing left on the line
 
 
 def _run_on_tty(args: Sequence[object], timeout: float = 600.0) -> tuple[int, str, str]:
