@@ -88,8 +88,8 @@ LP_SLACK = 1e-6
 #: slow-down), those places are added to the programs, at most REPAIRS times.
 REPAIR_ABOVE = 1e-2
 REPAIRS = 2
-#: The share of the acceleration limit the windows' ends assume for slowing down to the
-#: shot's end (:func:`_braking`).
+#: The share of the acceleration and jerk limits the windows' ends assume for slowing down
+#: to the shot's end (:func:`_braking`).
 BRAKING_SHARE = 0.5
 #: Long stretches are solved in windows of this many frames, each looking this many
 #: frames further ahead.
@@ -398,8 +398,9 @@ def _braking(p1: Array, p2: Array, p3: Array, limits: Limits, u_scale: float,
     with np.errstate(divide="ignore", invalid="ignore"):
         for j in range(p1.shape[0] - 2, -1, -1):
             u, i = out[j + 1], j + 1
-            # how fast u may fall per unit x at point i, by each axis's acceleration and jerk
-            by_acc = np.where(a1[i] > 1e-12, (acc - 2.0 * p2[i] * u * np.sign(p1[i])) / a1[i],
+            # how fast u may fall per unit x at point i, by each axis's acceleration (u' at
+            # least (-A - 2 p2 u) / p1 for p1 > 0, mirrored for p1 < 0) and jerk
+            by_acc = np.where(a1[i] > 1e-12, (acc + 2.0 * p2[i] * u * np.sign(p1[i])) / a1[i],
                               np.inf)
             room = jerk / math.sqrt(2.0 * u * u_scale) - 2.0 * a3[i] * u
             by_jerk = np.where(a2[i] > 1e-12, np.maximum(room, 0.0) / (3.0 * a2[i]), np.inf)
