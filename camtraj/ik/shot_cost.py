@@ -103,6 +103,27 @@ def _whole_power(a: Array, e: int) -> Array:
     return np.ones_like(a) if result is None else result
 
 
+def _stop_root(a1: Array, g: Array) -> Array:
+    """The root s of s^4 - a1 s^3 - g = 0 above a1 for each a1 >= 0, g > 0 (at most 16: two
+    ends by eight axes), by Newton's method from above (s = a1 + g^(1/4)), all of them
+    stepped together until every step is below 1e-15 s. In Python floats: on arrays this
+    small each numpy operation costs more than the arithmetic (the same IEEE operations in
+    the same order, so the same roots to the last bit)."""
+    ag = a1.tolist()
+    gg = g.tolist()
+    s = (a1 + g ** 0.25).tolist()
+    for _ in range(12):
+        more = False
+        for i, (si, ai, gi) in enumerate(zip(s, ag, gg, strict=True)):
+            s2 = si * si
+            step = (s2 * s2 - ai * s2 * si - gi) / max(4.0 * s2 * si - 3.0 * ai * s2, 1e-300)
+            s[i] = si - step
+            more = more or abs(step) > 1e-15 * s[i]
+        if not more:
+            break
+    return np.array(s)
+
+
 @dataclass(frozen=True)
 class TakeUse:
     """A path's use of the limits: the spline's velocity, acceleration and jerk usages
@@ -228,16 +249,7 @@ class ShotCost:
         g = np.where(gains, c * z2 * z2, 0.0)
         need = a1.copy()
         if gains.any():
-            ag, gg = a1[gains], g[gains]
-            s = ag + gg ** 0.25  # above the root of s^4 - a1 s^3 - g: Newton falls to it
-            for _ in range(12):
-                s2 = s * s
-                step = (s2 * s2 - ag * s2 * s - gg) / np.maximum(4.0 * s2 * s - 3.0 * ag * s2,
-                                                                 1e-300)
-                s = s - step
-                if not (np.abs(step) > 1e-15 * s).any():
-                    break
-            need[gains] = s
+            need[gains] = _stop_root(a1[gains], g[gains])
         den = np.maximum(4.0 * need - 3.0 * a1, 1e-300)
         d1 = np.where(gains, np.sign(z1) * need / den, np.sign(z1))
         d2 = np.where(gains, 2.0 * c * z2 / np.maximum(need * need * den, 1e-300), 0.0)
