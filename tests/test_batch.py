@@ -256,7 +256,7 @@ def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) ->
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "out" / "blender_crane_up.mcap").stat().st_size > 0
     proc = subprocess.run([str(command), "place", str(shot), "-o", "placed.toml", "--jobs", "2",
-                           "--frames", "1:24"],
+                           "--frames", "1:6"],
                           cwd=tmp_path, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "placed.toml").is_file()

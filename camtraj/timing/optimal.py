@@ -28,8 +28,7 @@ The answer is then checked between the points, by its analytic values on a grid
 more than :data:`REPAIR_ABOVE`, those places become points of the programs and they are
 solved again; the small excess left is removed by playing the whole time law uniformly slower
 by just enough (velocity scales with the slow-down, jerk with its cube). The servo samples
-are taken at whole nanoseconds, the MCAP's stamps (:func:`_on_the_clock`), and checked once
-more, by their analytic values and by divided differences of the sampled
+are checked once more, by their analytic values and by divided differences of the sampled
 positions. If the answer is not shorter than the uniform take it must beat (the
 ``"scale"`` take, or the whole shot at its maximum feasible speed), :func:`optimal` returns
 None and the caller keeps that one.
@@ -225,10 +224,16 @@ def optimal(
     if frame_t[-1] >= scale_factor * dt * (n - 1):
         return None
 
-    # Every frame interval cut into the fewest even steps (whole nanoseconds, 1 ns apart at
-    # most) no longer than 1 / rate; the last frame is one more sample.
-    t, frac, rescale, interval, j, frame_idx = _on_the_clock(frame_t, rate)
-    tau = frac * np.concatenate([durations, [0.0]])[interval]  # the law's own time
+    # Every frame interval cut into the fewest equal steps no longer than 1 / rate; the
+    # last frame is one more sample.
+    steps = np.maximum(1, np.ceil(durations * rate - 1e-9)).astype(np.int64)
+    counts = np.concatenate([steps, [1]])
+    frame_idx = np.concatenate([[0], np.cumsum(counts[:-1])]).astype(np.int64)
+    interval = np.repeat(np.arange(n, dtype=np.int64), counts)
+    j = np.arange(interval.size) - frame_idx[interval]
+    frac = j / counts[interval]
+    tau = frac * np.concatenate([durations, [0.0]])[interval]
+    t = frame_t[interval] + tau
     x = interval + frac  # exact on frames; holds advance linearly at the original speed
     xd = np.full(t.size, 1.0 / dt)
     xdd = np.zeros(t.size)
@@ -242,7 +247,6 @@ def optimal(
         xd[sel] = np.sqrt(2.0 * u)
         xdd[sel] = u1
         xddd[sel] = u2 * xd[sel]
-    xd, xdd, xddd = xd * rescale, xdd * rescale**2, xddd * rescale**3
     samples = _timed(path, x, xd, xdd, xddd)
     # The samples as written, by their analytic values and by divided differences of the
     # positions (both are implied by the check of the laws; this is the last word).
@@ -250,42 +254,6 @@ def optimal(
             t, samples.q, limits):  # pragma: no cover - a bug, but never a take over a limit
         return None
     return t, x, samples, frame_idx
-
-
-def _on_the_clock(frame_t: Array, rate: float) -> tuple[Array, Array, Array, IntArray,
-                                                          IntArray, IntArray]:
-    """The samples on the file's clock: whole nanoseconds, as the MCAP stamps them.
-
-    Frame times are rounded to the nanosecond and each frame interval is cut into the fewest
-    steps no longer than ``1 / rate`` (rounded down to the nanosecond), spaced evenly in whole
-    nanoseconds. The law is played at the fraction of its own interval each sample reaches,
-    so every interval runs 1 +- 1e-8 times as fast as the law (its derivatives are scaled to
-    match). Written positions are then exactly the take's at their stamps, and the divided
-    differences a reader takes over them agree with the limits the samples keep (sampled
-    first and rounded after, a 60 s orbit's third differences read 1.9% over the jerk limit:
-    half a nanosecond in steps of 2-4 ms, at 2 m/s).
-
-    Returns:
-        Sample times [s], each sample's fraction of its frame interval, the interval's time
-        scale (law time per clock time), the frame interval of each sample, its index in it,
-        and the sample index of every frame.
-    """
-    frames_ns = np.round(frame_t * 1e9).astype(np.int64)
-    span = np.diff(frames_ns)
-    if np.any(span <= 0):  # pragma: no cover - frame intervals are microseconds at least
-        msg = "internal error: a frame interval shorter than a nanosecond"
-        raise RuntimeError(msg)
-    most = max(1, math.floor(1e9 / rate + 1e-6))  # the longest step [ns]
-    counts = np.concatenate([-(-span // most), [1]])
-    frame_idx = np.concatenate([[0], np.cumsum(counts[:-1])]).astype(np.int64)
-    interval = np.repeat(np.arange(frame_t.size, dtype=np.int64), counts)
-    j = np.arange(interval.size) - frame_idx[interval]
-    span_s = np.concatenate([span, [1]])[interval]
-    t_ns = frames_ns[interval] + (j * span_s) // counts[interval]
-    frac = (t_ns - frames_ns[interval]) / span_s
-    scale = np.diff(frame_t) / (span * 1e-9)
-    rescale = np.concatenate([scale, scale[-1:]])[interval]
-    return t_ns / 1e9, frac, rescale, interval, j, frame_idx
 
 
 def _timed(path: FramePath, x: Array, xd: Array, xdd: Array, xddd: Array,
