@@ -130,9 +130,9 @@ def test_shot_sinusoid_matches_analytic_derivatives(limits: Limits) -> None:
     assert take.speed_factor == 1.0
     assert take.rate == pytest.approx(240.0)  # 10 ticks per frame: the nearest to 250 Hz
     assert take.report.ticks_per_frame == 10
-    assert np.allclose(np.diff(take.t), 1 / 240.0, rtol=0, atol=1e-12)
+    assert np.allclose(np.diff(take.t), 1 / 240.0, rtol=0, atol=1e-9)  # the file's ns
     assert_passes_frames(take, q)
-    assert np.allclose(np.diff(take.frame_times), 1 / FPS, rtol=0, atol=1e-12)
+    assert np.allclose(np.diff(take.frame_times), 1 / FPS, rtol=0, atol=1e-9)
     assert take.shot_end - take.shot_start == pytest.approx(10.0, abs=1e-9)
 
     a, b = take.frame_samples[0], take.frame_samples[-1] + 1
@@ -287,7 +287,7 @@ def test_scale_factor_is_the_analytic_one(limits: Limits) -> None:
     assert take.shot_end - take.shot_start == pytest.approx(k * 5.0, rel=1e-9)
     assert take.report.ticks_per_frame == round(250 * k / FPS)
     assert take.rate == pytest.approx(take.report.ticks_per_frame * FPS / take.speed_factor)
-    assert np.allclose(np.diff(take.frame_times), take.speed_factor / FPS, rtol=0, atol=1e-12)
+    assert np.allclose(np.diff(take.frame_times), take.speed_factor / FPS, rtol=0, atol=1e-9)
     assert_passes_frames(take, q)
     assert_rest_to_rest(take)
     assert_within_limits_by_differences(take, limits, jerk=True)
@@ -354,7 +354,7 @@ def test_optimal_respects_limits_keeps_holds_and_beats_scale(limits: Limits) -> 
     assert take.mode == "optimal"
     assert not take.uniform
     assert np.all(np.diff(take.t) > 0)
-    assert np.max(np.diff(take.t)) <= 1 / 250.0 + 1e-12
+    assert np.max(np.diff(take.t)) <= 1 / 250.0 + 1e-9  # to the file's nanosecond
     assert_passes_frames(take, q)
     assert_rest_to_rest(take)
     assert_within_limits_by_differences(take, limits, jerk=True)
@@ -412,7 +412,7 @@ def test_runup_and_runout_meet_the_shot_continuously(limits: Limits) -> None:
     assert up["duration"] > 0
     assert out["duration"] > 0
     assert f0 == up["samples"]
-    assert take.shot_start == pytest.approx(up["duration"] + up["hold"], abs=1e-12)
+    assert take.shot_start == pytest.approx(up["duration"] + up["hold"], abs=1e-9)  # on ns
     assert 0 <= up["hold"] < h
     assert take.t.size == f1 + 1 + out["samples"]
     # The run-up starts at rest at its reported start and travels to the first frame.
@@ -454,6 +454,39 @@ def test_all_still_shot_is_a_plain_hold(limits: Limits) -> None:
         assert np.all(take.q == HOME)
         assert take.shot_end == pytest.approx(9 / FPS)
         assert math.isinf(take.report.max_speed)
+
+
+# ---------------------------------------------------------------------------------------------
+# The file's clock
+# ---------------------------------------------------------------------------------------------
+
+
+def test_the_clock_puts_each_position_where_the_take_is_at_its_stamp() -> None:
+    """A constant-jerk second planned at 240 Hz (steps of 4,166,666.67 ns), a film frame
+    every 10 samples: stamped in whole nanoseconds, its frames keep their positions exactly
+    and the third differences over the stamps give its jerk back. Rounding the times alone
+    (the positions left at the planned times) reads it up to 0.5% off."""
+    from camtraj.timing.clock import on_the_clock
+
+    t = np.arange(241) / 240.0 - 0.5
+    frames = np.arange(0, 241, 10)
+    # q = c0 + c1 t + c2 t^2 + c3 t^3 per axis: up to 2.8 m/s, jerk 15 and -9 m/s^3
+    c = np.array([[0.2, 0.5, -0.4, 2.5], [-1.0, 0.3, 0.2, -1.5]])
+    powers = np.stack([t**k for k in range(4)], axis=1)
+    q = powers @ c.T
+    qd = np.stack([np.ones_like(t), 2 * t, 3 * t**2], axis=1) @ c[:, 1:].T
+    qdd = np.stack([2 * np.ones_like(t), 6 * t], axis=1) @ c[:, 2:].T
+    qddd = np.tile(6 * c[:, 3], (t.size, 1))
+    planned = q.copy()
+    stamps = on_the_clock(t, frames, q, qd, qdd, qddd)
+    assert np.array_equal(np.round(stamps * 1e9) / 1e9, stamps)  # whole nanoseconds
+    assert np.max(np.abs(stamps - t)) <= 0.5e-9 + 1e-15
+    assert np.array_equal(q[frames], planned[frames])  # frames exactly
+    jerk = 6 * c[:, 3]
+    moved = np.abs(divided(stamps, q, 3) - jerk).max(axis=0) / np.abs(jerk)
+    rounded = np.abs(divided(stamps, planned, 3) - jerk).max(axis=0) / np.abs(jerk)
+    assert moved.max() < 2e-4, moved  # 4e-5 and 2e-5: the easing between frames
+    assert rounded.min() > 2e-3, rounded  # 0.5% and 0.3%: what the file read before
 
 
 # ---------------------------------------------------------------------------------------------

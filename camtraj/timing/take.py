@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from camtraj.timing.clock import on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
     Edge,
@@ -107,7 +108,9 @@ class Take:
     """A timed trajectory from rest to rest, sampled at the servo rate.
 
     Attributes:
-        t: Sample times [s], shape (m,), ``t[0] = 0`` (the take starts at rest).
+        t: Sample times [s], shape (m,), ``t[0] = 0`` (the take starts at rest): whole
+            nanoseconds, the file's stamps, with every sample's values the take's at its
+            stamp (:mod:`camtraj.timing.clock`).
         q: Positions [m, rad], shape (m, k).
         qd: Velocities [m/s, rad/s], shape (m, k).
         qdd: Accelerations [m/s², rad/s²], shape (m, k).
@@ -125,8 +128,9 @@ class Take:
             nearest to the requested rate; in an ``"optimal"`` retime each frame interval is
             cut into equal steps no longer than ``1 / requested rate`` and this is the lowest
             rate (longest step) used.
-        uniform: Whether every step of ``t`` has the same length (not in an ``"optimal"``
-            retime; an ``"optimal"`` take that could not beat ``"scale"`` is the scale take).
+        uniform: Whether the take was planned on a uniform grid, every step the same to the
+            nanosecond (not in an ``"optimal"`` retime; an ``"optimal"`` take that could not
+            beat ``"scale"`` is the scale take).
         shot_start: Take time of the first film frame [s].
         shot_end: Take time of the last film frame [s].
         report: The :class:`TimingReport`.
@@ -330,6 +334,7 @@ def time_shot(
         np.concatenate([getattr(up, f), columns.pop(0), getattr(out, f)])
         for f in ("q", "qd", "qdd", "qddd"))
     frame_samples = (n_up + frame_idx).astype(np.int64)
+    t = on_the_clock(t, frame_samples, q_all, qd_all, qdd_all, qddd_all)
     frame_times_take = t[frame_samples]
 
     if edge_note and up.report["edges"] != edges:  # the take's own ends are the fast ones
