@@ -737,6 +737,14 @@ def tf_times(take: TakeData) -> Array:
     k_lo = -math.floor((anchor - start) * take.fps + 1e-9)
     k_hi = math.floor((end - anchor) * take.fps + 1e-9)
     times = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
+    # the grid's film frames at the frames' own stamps: those are whole nanoseconds (the
+    # file's clock), and the grid's sums can be a nanosecond off them
+    ft = np.asarray(take.frame_times, dtype=float)
+    if ft.size:
+        after = np.searchsorted(ft, times).clip(0, ft.size - 1)
+        before = (after - 1).clip(0)
+        near = np.where(np.abs(ft[before] - times) < np.abs(ft[after] - times), before, after)
+        times = np.where(np.abs(ft[near] - times) <= 2e-9, ft[near], times)
     out: Array = np.clip(times, start, end)
     return out
 

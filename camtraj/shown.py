@@ -40,7 +40,8 @@ def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:
     ``step_ms``: the shortest and longest step [ms], None when not known (the rate alone)."""
     if step_ms is not None:
         short, long = step_ms
-        if long - short > 1e-6 * long:
+        # steps a nanosecond apart are one period on the file's clock (whole nanoseconds)
+        if long - short > max(1e-6 * long, 1.5e-6):
             return (f"servo steps {short:.3f}-{long:.3f} ms (each frame interval in equal "
                     "steps, every frame a sample: not a fixed period)")
         if long > 0.0:

@@ -286,6 +286,26 @@ def test_tf_times_grid(take: TakeData) -> None:
     assert np.all(np.min(np.abs(times[:, None] - take.frame_times[None, :]), axis=0) < 1e-12)
 
 
+def test_tf_times_hold_every_film_frame_stamp_of_a_timed_take() -> None:
+    """Frame times of a take are whole nanoseconds (the file's clock) and may sit a
+    nanosecond off the frame-rate grid's sums (1/24 s is not whole nanoseconds): /tf still
+    has a sample at every film frame's own stamp."""
+    from types import SimpleNamespace
+
+    from camtraj.mcap_io import seconds_to_ns
+    from camtraj.timing import Limits, time_shot
+    from tests.timing_checks import HOME, frame_times
+
+    t = frame_times(2000)
+    q = HOME + 0.5 * np.sin(2 * np.pi * t[:, None] / 20.0)  # its run-up: 137 ticks at 240 Hz
+    take = time_shot(q, t, Limits.from_robot(ROBOT), mode="shot")
+    shot = SimpleNamespace(t=take.t, frame_times=take.frame_times, fps=24.0)
+    frames_ns = seconds_to_ns(take.frame_times)
+    grid = seconds_to_ns(take.frame_times[0] + np.arange(2000) / 24.0)
+    assert np.any(grid != frames_ns)  # the case: the grid's sums miss some frame stamps
+    assert np.all(np.isin(frames_ns, seconds_to_ns(tf_times(shot))))  # type: ignore[arg-type]
+
+
 def test_interpolate_servo() -> None:
     t = np.array([0.0, 0.1, 0.25, 0.4])
     coef = np.array([[0.3, -1.0], [2.0, 0.5], [-1.5, 0.25], [0.7, 3.0]])  # cubic per joint

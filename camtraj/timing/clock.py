@@ -13,18 +13,23 @@ sample first and moves its position to where the take is at that stamp:
   exactly (the frame's solution): the clock runs up to half a nanosecond from the plan there;
 * between frames that offset is eased from one frame's to the next (a quintic easing, flat to
   second order at the frames; held before the first frame and after the last), so the
-  clock's rate stays within about 1e-7 of the plan's and changes smoothly: a rate that jumped
-  at each frame (each interval mapped linearly onto its stamps) kinked the velocity there,
-  and the third differences of an optimal take of a 60 s sinusoid read 0.13% over the jerk
-  limit (0.08% with the easing: the easing itself, up to a nanosecond over a 35 ms frame,
-  is what remains);
+  clock's rate stays within 2 ns per frame interval of the plan's (5e-8 at 24 fps) and
+  changes smoothly: a rate that jumped at each frame (each interval mapped linearly onto its
+  stamps) kinked the velocity there, and the third differences of an optimal take of a 60 s
+  sinusoid read 0.13% over the jerk limit (0.08% with the easing: the easing itself, up to a
+  nanosecond over a 35 ms frame, is what remains);
 * each position is moved from its planned time to the time its stamp stands for by the
   take's own derivatives (third order: exact for the splines and jerk-limited profiles the
   take is made of, and far below 1e-20 m from an optimal law over a nanosecond).
 
-The velocities, accelerations and jerks stay the take's at the planned times (within about
-1e-7 of their values at the stamps, relative), so they keep every limit exactly as the
-timing stage checked them.
+The velocities, accelerations and jerks stay the take's at the planned times (a nanosecond
+and a relative 2 ns per frame interval from their values at the stamps), so they keep every
+limit exactly as the timing stage checked them.
+
+Where frames are one or two servo steps apart (240 fps at 250 Hz; 120 fps) the easing has no
+room: every sample (or every other one) is a frame pinned to its solution, and a reader's
+third differences still see the half-nanosecond roundings (0.5% of a jerk limit at 2 m/s with
+one step per frame, 0.12% with two, 0.05% at 60 fps, 0.005% at 24 fps).
 """
 
 from __future__ import annotations
@@ -57,6 +62,9 @@ def on_the_clock(t: Array, frame_samples: IntArray, q: Array, qd: Array, qdd: Ar
         raise RuntimeError(msg)
     clock = stamps / 1e9
     fs = np.asarray(frame_samples, dtype=np.int64)
+    if fs.size == 0:
+        msg = "a take has at least one film frame"
+        raise ValueError(msg)
     lag = t[fs] - clock[fs]  # each frame's planned time after its stamp, |lag| <= 0.5 ns
     eased = np.full(t.size, lag[0])  # the lag at each sample: held before the first frame
     if fs.size >= 2:  # eased from frame to frame, held after the last
@@ -69,7 +77,7 @@ def on_the_clock(t: Array, frame_samples: IntArray, q: Array, qd: Array, qdd: Ar
         eased[last:] = lag[-1]
     d = ((clock - t) + eased)[:, None]  # [s] from each planned time to its stamp's
     d[fs] = 0.0  # a frame's stamp is its planned time: its solution, exactly
-    for a in range(0, t.size, _BLOCK):  # a block of rows at a time: no take-sized temporaries
+    for a in range(0, t.size, _BLOCK):  # a block of rows at a time: no (m, axes) temporaries
         b = a + _BLOCK
         db = d[a:b]
         q[a:b] += db * (qd[a:b] + (db / 2.0) * (qdd[a:b] + (db / 3.0) * qddd[a:b]))

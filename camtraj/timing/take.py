@@ -109,8 +109,9 @@ class Take:
 
     Attributes:
         t: Sample times [s], shape (m,), ``t[0] = 0`` (the take starts at rest): whole
-            nanoseconds, the file's stamps, with every sample's values the take's at its
-            stamp (:mod:`camtraj.timing.clock`).
+            nanoseconds, the file's stamps; each position is the take's at the time its
+            stamp stands for (:mod:`camtraj.timing.clock`: the stamp itself, give or take
+            the nanosecond a frame's stamp rounds off, eased between frames).
         q: Positions [m, rad], shape (m, k).
         qd: Velocities [m/s, rad/s], shape (m, k).
         qdd: Accelerations [m/s², rad/s²], shape (m, k).
