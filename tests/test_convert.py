@@ -299,7 +299,7 @@ def test_every_frame_solution_is_a_joint_states_sample(runs: dict[str, Run], key
 # --------------------------------------------------------------------------------------------
 
 
-def time_grid(t: Array) -> tuple[Array, float]:
+def stamp_times(t: Array) -> tuple[Array, float]:
     """Sample times to difference over, and their error [s]: the stamps themselves.
 
     Stamps are whole nanoseconds, and every written position is the take's at its stamp
@@ -368,7 +368,7 @@ def test_finite_differences_stay_within_limits(
     runs: dict[str, Run], robot: Robot, key: str
 ) -> None:
     take = runs[key].take()
-    t, t_err = time_grid(take.t)
+    t, t_err = stamp_times(take.t)
     q = take.q
     v = derivative_estimates(t, q, 1)
     a = derivative_estimates(t, q, 2)
@@ -391,7 +391,7 @@ def test_stored_velocities_agree_with_finite_differences(
     bounds); with a bounded jerk J and equal steps by at most J h² / 6.
     """
     take = runs[key].take()
-    t, t_err = time_grid(take.t)
+    t, t_err = stamp_times(take.t)
     q, qd = take.q, take.qd
     h1, h2 = np.diff(t)[:-1, None], np.diff(t)[1:, None]
     central = (q[2:] - q[:-2]) / (h1 + h2)
@@ -459,7 +459,7 @@ def test_whip_pan_succeeds_when_scaled_by_the_smallest_factor(
     assert run.take().metadata["timing_mode"] == "scale"
     # The smallest factor: some axis uses (nearly) all of some limit in the shot part.
     take = run.take()
-    t, _ = time_grid(take.t)
+    t, _ = stamp_times(take.t)
     f = frame_indices(take)
     part = slice(f[0], f[-1] + 1)
     use = max(

@@ -40,7 +40,6 @@ from numpy.typing import NDArray
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-NS = 1e-9  # [s] the file's tick
 _BLOCK = 4096  # rows moved at a time
 
 
@@ -56,7 +55,7 @@ def on_the_clock(t: Array, frame_samples: IntArray, q: Array, qd: Array, qdd: Ar
     Returns:
         The stamps [s] (m,): whole nanoseconds, as the file holds them.
     """
-    stamps = np.round(t / NS).astype(np.int64)
+    stamps = np.round(t * 1e9).astype(np.int64)  # as the MCAP writer rounds them
     if t.size > 1 and not np.all(np.diff(stamps) > 0):  # pragma: no cover - steps >= 10 us
         msg = "internal error: two servo samples share a nanosecond"
         raise RuntimeError(msg)
