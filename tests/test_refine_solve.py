@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from camtraj.ik.refine import _solve_banded
+from camtraj.ik.refine import DAMPING_FLOOR, _solve_banded
 
 
 def band_matrix(H: np.ndarray) -> np.ndarray:
@@ -27,7 +27,7 @@ def dense(H: np.ndarray, mu: float) -> np.ndarray:
     """The (2n, 2n) matrix the blocks H (n, D, 2, 2) stand for, damped as documented."""
     A = band_matrix(H)
     diag = np.diag(A).copy()
-    A[np.diag_indices(A.shape[0])] = diag * (1.0 + mu) + 1e-9 * max(diag.max(), 1e-12) + 1e-12
+    A[np.diag_indices(A.shape[0])] = diag * (1.0 + mu) + DAMPING_FLOOR * max(diag.max(), 1e-12)
     return A
 
 
@@ -55,6 +55,35 @@ def test_banded_solve_equals_a_dense_solve(n: int, width: int) -> None:
         want = np.linalg.solve(dense(H, mu), -g.ravel()).reshape(n, 2)
         got = _solve_banded(H, g, mu)
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-11)
+
+
+def _differences(n: int, order: int) -> np.ndarray:
+    """The (n - order, n) matrix of order-th forward differences."""
+    stencil = {1: (-1, 1), 2: (1, -2, 1), 3: (-1, 3, -3, 1)}[order]
+    D = np.zeros((n - order, n))
+    for i in range(n - order):
+        D[i, i:i + order + 1] = stencil
+    return D
+
+
+@pytest.mark.parametrize("n", [100, 250, 600])
+def test_the_solve_keeps_the_steps_of_smooth_bends(n: int) -> None:
+    """A take near its jerk limit: the normal matrix is mostly third differences, with weak
+    velocity and acceleration terms, so a smooth bend of a whole curve has a curvature about
+    5e-9 of the diagonal. The solve must give that step back (the slow refinement's steps
+    are such bends); a shift of 1e-9 of the diagonal returned 12-16% of them short."""
+    A1 = sum(w * _differences(n, k).T @ _differences(n, k)
+             for k, w in ((1, 1e-4), (2, 1e-2), (3, 1.0))) + 1e-7 * np.eye(n)
+    assert np.linalg.eigvalsh(A1)[0] < 1e-8 * A1.diagonal().max()  # the premise
+    H = np.zeros((n, 4, 2, 2))
+    for d in range(4):
+        for i in range(n - d):
+            H[i, d] = A1[i, i + d] * np.eye(2)
+    u = np.linspace(-1.0, 1.0, n)
+    want = 0.01 * np.stack([1.0 - u ** 2, 0.5 * u * (1.0 - u ** 2)], axis=1)  # [m]
+    g = -(A1 @ want)
+    got = _solve_banded(H, g, 0.0)
+    assert np.abs(got - want).max() <= 1e-3 * np.abs(want).max()
 
 
 def test_tied_normal_equations_are_the_projected_ones() -> None:

@@ -132,32 +132,11 @@ def test_default_is_at_least_as_fast_as_paper_on_every_shot(
     _fail_all("default slower than paper", failures, len(solved))
 
 
-#: Shots where the default is known to fall short of 95% of the 10x-effort reference, with the
-#: share it must still reach (measured on the day it was listed) and why. A listed shot that
-#: reaches the reference fails the test too, so the list only shrinks as the solver improves.
-KNOWN_SHORT = {
-    # The refinement converges slowly on these: 10x the rounds keeps lowering the peak use.
-    # Both gained when the later stages' curvature floor (``refine._STAGES``) let those stages
-    # descend at all: the arc 1.92x -> 2.35x (reference 2.51x -> 2.47x, share 0.76 -> 0.95,
-    # kept here while it sits on the line), the follow 2.22x -> 2.43x, its reference more
-    # (2.22x -> 2.83x, share 1.00 -> 0.86). The floors guard against regressions.
-    "arc 100 deg 5 s (Z-up m, 50 fps)": 0.90,
-    "follow a runner 5 s (Z-up m, 60 fps)": 0.82,
-}
-
-
 def test_default_is_within_5_percent_of_ten_times_the_effort_on_every_shot(
         solved: dict[str, Speeds]) -> None:
-    failures = []
-    for name, s in solved.items():
-        share = s.default / s.effort
-        floor = KNOWN_SHORT.get(name, EFFORT_SHARE)
-        if not share >= floor:
-            failures.append(f"{name}: default {s.default:.3f} < {floor:.0%} of {EFFORT}x "
-                            f"effort {s.effort:.3f} (x{share:.3f})")
-        elif name in KNOWN_SHORT and share >= 1.0:
-            failures.append(f"{name}: now {share:.3f} of {EFFORT}x effort: take it off "
-                            "KNOWN_SHORT")
+    failures = [f"{name}: default {s.default:.3f} < {EFFORT_SHARE:.0%} of {EFFORT}x effort "
+                f"{s.effort:.3f} (x{s.default / s.effort:.3f})" for name, s in solved.items()
+                if not s.default >= EFFORT_SHARE * s.effort]
     _fail_all(f"default below {EFFORT_SHARE:.0%} of {EFFORT}x effort", failures, len(solved))
 
 
