@@ -369,7 +369,7 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
         hz = np.where(active, 2 * (lam + cost.close_weight * (close > 0)) * dz * dz, 0.0)
         g += np.einsum("ki,kip->kp", gz, grad_y)
         H[:, 0] += np.einsum("ki,kip,kiq->kpq", hz, grad_y, grad_y)
-    slow = max(1.0, use.peak())
+    slow = cost.room_slowdown(use)
     for edge, inner in ((0, 1), (n - 1, n - 2)):  # run-up / run-out room
         pe, slope = cost.edge_excursion(q[edge], q[inner], slow)
         e = cost.edge_intrusion(pe)

@@ -56,6 +56,14 @@ CLOSE = 0.8
 
 MARGIN_POWER = 4.0  # the power mean over frames that stands in for the worst frame
 
+#: The fastest take the run-up and run-out room is planned for, as a multiple of real time.
+#: The room is planned at the speed the objective aims for (1 / the peak use): the timing
+#: stage's maximum feasible speed needs the run-out's stop to fit at that speed, where it is
+#: longest, so room planned at real time let a refinement bring an end axis close to its
+#: limit and lose the speed it gained (a 140 deg arc: model 8.5x, take 6.0x, the run-out's
+#: extend 0.1 mm past its limit). Beyond ten times real time a crew needs no more.
+ROOM_SPEED = 10.0
+
 
 def margin_peak(e: Array) -> tuple[float, Array]:
     """A smooth stand-in for the worst frame's sum of squared margin intrusions e (n, 10):
@@ -278,9 +286,15 @@ class ShotCost:
             j += self.scale * use.power_sum(self.power, self.scale) ** (1.0 / self.power)
             j += self.tie_break * float((np.abs(np.diff(q, axis=0) / self.vel)
                                          @ self.motion_coef).sum()) / (n - 1)
-            slow = max(1.0, use.peak())
+            slow = self.room_slowdown(use)
             j += self.refine_edge(q[0], q[1], slow) + self.refine_edge(q[-1], q[-2], slow)
         return float(j)
+
+    @staticmethod
+    def room_slowdown(use: TakeUse) -> float:
+        """The slow-down (below 1: a faster take) the run-up and run-out room is planned at:
+        the take at the speed its peak use allows, at most :data:`ROOM_SPEED` x real time."""
+        return max(use.peak(), 1.0 / ROOM_SPEED)
 
     def refine_edge(self, q_edge: Array, q_inner: Array, slow: float) -> float:
         """Run-up / run-out room at an end frame, the take running ``slow`` times slower:
