@@ -12,11 +12,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
 
 from camtraj.robot import Robot
 from camtraj.timing import Limits
 
 _ROOT = Path(__file__).resolve().parents[1]
+
+# One BLAS thread in every test process (numpy is loaded: threadpoolctl sets it) and in every
+# command line the tests start (the environment, read when their numpy loads), as the shot
+# solver and batch's workers already run. The suite keeps both cores busy (xdist workers, the
+# shot set's pool, place -j 2), and an idle BLAS thread spinning for small matrices there costs
+# more than it saves: three times the CPU on test_shot, test_convert and test_ik together.
+# A variable set outside the suite is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
 
 @pytest.fixture(scope="session")
