@@ -61,9 +61,10 @@ REFINE_STAGES = len(_STAGES)
 #: the diagonal, so a floor at that level damped exactly the steps that raise the speed
 #: most. 1e-12 leaves them whole (a bend recovered to 2e-4, against 15% at 1e-9) and is
 #: still far above the factorisation's round-off (band width x eps, about 1e-14). Measured
-#: on the shot set (1e-9 -> 1e-12): the 100 deg arc 2.35x -> 2.80x real time, the 60 fps
-#: follow 2.43x -> 2.87x, median 1.002x; every shot within 2% of 10x the effort (the
-#: smallest share 0.94 -> 0.985); at 1e-11 the follow stays at 0.95 of it.
+#: on the shot set (1e-9 -> 1e-12, before the run-out room was planned at the aimed speed,
+#: :meth:`ShotCost.room_slowdown`): the 100 deg arc 2.35x -> 2.80x real time, the 60 fps
+#: follow 2.43x -> 2.87x, median 1.002x; the smallest share of 10x the effort 0.94 -> 0.985
+#: (at 1e-11 the follow stays at 0.95 of it).
 DAMPING_FLOOR = 1e-12
 
 

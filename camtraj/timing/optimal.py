@@ -62,7 +62,8 @@ IntArray = NDArray[np.int64]
 #: interval of duration D the easing adds up to about 60 v (1 ns) / D^3 of jerk at velocity
 #: v, most where the take is fastest: 0.1% of the limit on the dolly sample's optimal take
 #: (three servo steps per frame), under 1% wherever a frame interval holds three or more
-#: 4 ms steps. Costs a jerk-bound optimal take 0.3% of its speed.
+#: 4 ms steps. Costs a take bound by jerk alone 0.3% of its speed (the samples' optimal
+#: takes 0.03-0.09% of their duration).
 CLOCK_HEADROOM = 0.01
 
 #: Cubic B-spline segments of ``u(x)`` per frame interval.
