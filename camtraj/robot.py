@@ -110,7 +110,7 @@ class IKSettings:
     refine_rounds: most Gauss-Newton steps of each stage of the refinement.
     refine_tolerance: a stage has converged after three steps in a row that lower its
         objective by less than this fraction (the first stage; the later ones, which
-        polish its answer, at ten times it).
+        polish its answer, at ten times it), each by no more than the step before.
     """
 
     objective: str = "shot"

@@ -137,32 +137,11 @@ def test_default_is_at_least_as_fast_as_paper_on_every_shot(
     _fail_all("default slower than paper", failures, len(solved))
 
 
-#: Shots where the default is known to fall short of 95% of the 10x-effort reference, with the
-#: share it must still reach (measured on the day it was listed) and why. A listed shot that
-#: reaches 95% fails the test too, so the list only shrinks as the solver improves.
-KNOWN_SHORT = {
-    # Its first two stages stop at their start: three rounds in a row gain less than the
-    # tolerance while the damping is still shrinking from its starting 1e-3, and only the
-    # later stages move. The default 2.92x (1.20x the stop-26 solver), the reference 3.26x
-    # (share 0.896). A start damping of 1e-6 gives 3.16x here but sends a fresh 180 deg
-    # semi-orbit to 0.58 of its reference: the start damping keeps the first stage near the
-    # programme's answer, which most shots need.
-    "follow a runner 5 s (Z-up m, 60 fps)": 0.85,
-}
-
-
 def test_default_is_within_5_percent_of_ten_times_the_effort_on_every_shot(
         solved: dict[str, Speeds]) -> None:
-    failures = []
-    for name, s in solved.items():
-        share = s.default / s.effort
-        floor = KNOWN_SHORT.get(name, EFFORT_SHARE)
-        if not share >= floor:
-            failures.append(f"{name}: default {s.default:.3f} < {floor:.0%} of {EFFORT}x "
-                            f"effort {s.effort:.3f} (x{share:.3f})")
-        elif name in KNOWN_SHORT and share >= EFFORT_SHARE:
-            failures.append(f"{name}: now {share:.3f} of {EFFORT}x effort: take it off "
-                            "KNOWN_SHORT")
+    failures = [f"{name}: default {s.default:.3f} < {EFFORT_SHARE:.0%} of {EFFORT}x effort "
+                f"{s.effort:.3f} (x{s.default / s.effort:.3f})" for name, s in solved.items()
+                if not s.default >= EFFORT_SHARE * s.effort]
     _fail_all(f"default below {EFFORT_SHARE:.0%} of {EFFORT}x effort", failures, len(solved))
 
 
