@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
-from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, TakeUse, margin_peak, powers
+from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, TakeUse, margin_peak
 from camtraj.ik.spline_ops import BandOps
 from camtraj.robot import Robot
 
@@ -318,15 +318,18 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
     pad = width  # frames of padding on either side of the gathered arrays
     M = np.zeros((width, n + 2 * pad, 8))  # M[d, pad + f]: curvature coupling f and f + d
     gq = np.zeros((n + 2 * pad, 8))
-    phi = use.power_sum(p, s)
+    scaled = use.scaled(p, s)
+    phi = scaled.phi
     kappa = (s / p) * max(phi, 1e-300) ** (1.0 / p - 1.0)
     order = np.asarray(ops.orders, dtype=float)
     ex = p / order
     c = s ** order
     lim = np.stack([(cost.vel, cost.acc, cost.jerk)[k - 1] for k in ops.orders], axis=-1)
-    a = np.abs(use.z) / c
-    dz = powers(a, ex - 1.0) * np.sign(use.z) * (kappa * ex / (c * lim))
-    w = powers(np.maximum(a, floor), ex - 2.0) * (kappa * ex * (ex - 1.0) / (c * c * lim * lim))
+    a, below = scaled.a, scaled.below  # a^(ex - 2)
+    dz = below * use.z * (kappa * ex / (c * c * lim))  # a^(ex - 1) sign(z) = a^(ex - 2) z / c
+    if floor > 0.0:
+        below = np.where(a >= floor, below, floor ** (ex - 2.0))
+    w = below * (kappa * ex * (ex - 1.0) / (c * c * lim * lim))
     _gather(ops, dz, w, gq, M, pad)
     if use.ends is not None:  # the ends' stopping needs: one row per end and axis
         need, d1, d2, rows = use.ends

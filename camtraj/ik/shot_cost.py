@@ -36,7 +36,7 @@ speed the take will run at) carry the margin cost, and a steep cost past a limit
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -143,6 +143,8 @@ class TakeUse:
     ops: BandOps
     z: Array
     ends: tuple[Array, Array, Array, Array] | None
+    _scaled: dict[tuple[float, float], ScaledUse] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
 
     def peak(self) -> float:
         """max(|v|, |a|^(1/2), |j|^(1/3), end needs): the take runs at most at 1/peak."""
@@ -155,11 +157,44 @@ class TakeUse:
 
     def power_sum(self, power: float, scale: float) -> float:
         """sum (u / scale)^power over every use u (u = |v|, |a|^(1/2), |j|^(1/3), needs)."""
-        k = np.asarray(self.ops.orders, dtype=float)
-        phi = float(powers(np.abs(self.z) / scale ** k, power / k).sum())
-        if self.ends is not None:
-            phi += float(((self.ends[0] / scale) ** power).sum())
-        return phi
+        return self.scaled(power, scale).phi
+
+    def scaled(self, power: float, scale: float) -> ScaledUse:
+        """The usages' powers at ``power`` and ``scale`` (:class:`ScaledUse`), computed once
+        per pair: the objective, its gradient and its curvature all read them (the objective
+        of a kept step, then the next round's normal equations)."""
+        got = self._scaled.get((power, scale))
+        if got is None:
+            got = ScaledUse.of(self, power, scale)
+            self._scaled[(power, scale)] = got
+        return got
+
+
+@dataclass(frozen=True)
+class ScaledUse:
+    """A :class:`TakeUse`'s usages z (rows, 8, k) of order k scaled for a power mean at
+    ``power`` and ``scale``: a = |z| / scale^k, whose power ex = power / k is the term of
+    the sum; ``below`` = a^(ex - 2), from which the term (a^2 below), its slope (a below)
+    and its curvature (below) follow; ``phi`` the sum of the terms, the ends' stopping needs
+    included."""
+
+    a: Array
+    below: Array
+    phi: float
+
+    @classmethod
+    def of(cls, use: TakeUse, power: float, scale: float) -> ScaledUse:
+        k = np.asarray(use.ops.orders, dtype=float)
+        ex = power / k
+        if ex.min() < 2.0:
+            msg = f"the power mean's power {power:g} is below twice the highest order {k.max():g}"
+            raise ValueError(msg)
+        a = np.abs(use.z) / scale ** k
+        below = powers(a, ex - 2.0)
+        phi = float((below * a * a).sum())
+        if use.ends is not None:
+            phi += float(((use.ends[0] / scale) ** power).sum())
+        return cls(a, below, phi)
 
 
 @dataclass(frozen=True)
