@@ -80,15 +80,15 @@ class BandOps:
         padded = self._padded(q)
         win = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)[:rows]
         a, b = self.inner
-        if b <= a:
-            return np.asarray(np.einsum("rwk,rmw->rmk", self.coef, win))
+        if b <= a:  # rows with their own weights: one batched product (row, m, w) @ (row, w, k)
+            return np.asarray(win @ self.coef)
         out = np.empty((rows, q.shape[1], k))
         # the shift-invariant rows: one product, over windows along contiguous frame rows
         frames = np.ascontiguousarray(padded.T)  # (m, rows + width)
         inner = np.lib.stride_tricks.sliding_window_view(frames, width, axis=1)[:, a:b]
         out[a:b] = (inner @ self.coef[a]).transpose(1, 0, 2)
-        out[:a] = np.einsum("rwk,rmw->rmk", self.coef[:a], win[:a])
-        out[b:] = np.einsum("rwk,rmw->rmk", self.coef[b:], win[b:])
+        out[:a] = win[:a] @ self.coef[:a]
+        out[b:] = win[b:] @ self.coef[b:]
         return out
 
     def _padded(self, q: Array) -> Array:
