@@ -33,7 +33,7 @@ from camtraj.ik.closed_form import EXTEND
 from camtraj.ik.region import Region
 from camtraj.ik.shot import branch_measures
 from camtraj.ik.shot_cost import CLOSE, N_MEASURES, ShotCost, TakeUse, margin_peak
-from camtraj.ik.spline_ops import BandOps
+from camtraj.ik.spline_ops import BandOps, windows
 from camtraj.robot import Robot
 
 Array = NDArray[np.float64]
@@ -365,7 +365,7 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
     g_cols = np.zeros((2, n + width, 8))
     g_cols[:, :n] = G.transpose(2, 0, 1)
     H = np.empty((n, width, 2, 2))
-    right = [np.lib.stride_tricks.sliding_window_view(g_cols[col], n, axis=0)[:width]
+    right = [windows(g_cols[col], n, count=width)
              for col in range(2)]  # right[col][d, i, k] = G[k + d, i, col]
     for row in range(2):
         left = M[:, pad:pad + n] * g_cols[row, :n]  # (d, k, i)
@@ -476,7 +476,7 @@ def _windows(v: Array, width: int) -> Array:
     rows t - width + 1 .. t (zero before the first and after the last row)."""
     padded = np.zeros((v.shape[0] + 2 * (width - 1), *v.shape[1:]))
     padded[width - 1:width - 1 + v.shape[0]] = v
-    return np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)
+    return windows(padded, width)
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -148,6 +149,10 @@ class TakeUse:
 
     def peak(self) -> float:
         """max(|v|, |a|^(1/2), |j|^(1/3), end needs): the take runs at most at 1/peak."""
+        return self._peak
+
+    @cached_property
+    def _peak(self) -> float:
         # column by column: numpy's reduction over the leading axes of (rows, 8, k) is slow
         top = np.array([np.abs(self.z[..., i]).max() for i in range(self.z.shape[-1])])
         out = float((top ** (1.0 / np.asarray(self.ops.orders, dtype=float))).max())

@@ -78,14 +78,14 @@ class BandOps:
         """Values (rows, m, k) for frame values q (n, m)."""
         rows, width, k = self.coef.shape
         padded = self._padded(q)
-        win = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)[:rows]
+        win = windows(padded, width, count=rows)
         a, b = self.inner
         if b <= a:  # rows with their own weights: one batched product (row, m, w) @ (row, w, k)
             return np.asarray(win @ self.coef)
         out = np.empty((rows, q.shape[1], k))
         # the shift-invariant rows: one product, over windows along contiguous frame rows
         frames = np.ascontiguousarray(padded.T)  # (m, rows + width)
-        inner = np.lib.stride_tricks.sliding_window_view(frames, width, axis=1)[:, a:b]
+        inner = windows(frames, width, axis=1, count=b)[:, a:b]
         out[a:b] = (inner @ self.coef[a]).transpose(1, 0, 2)
         out[:a] = win[:a] @ self.coef[:a]
         out[b:] = win[b:] @ self.coef[b:]
@@ -98,6 +98,18 @@ class BandOps:
         lo = -self.offset  # q[j] sits at padded index j + lo
         pad[lo:lo + q.shape[0]] = q[: rows + width - lo]
         return pad
+
+
+def windows(a: Array, width: int, axis: int = 0, count: int | None = None) -> Array:
+    """A read-only view of the first ``count`` (default: all) windows of ``width`` along
+    ``axis``: window i holds a[i:i + width] there, as a new last axis (numpy's
+    ``sliding_window_view`` without its argument checks, which cost more than the products
+    that read these views)."""
+    total = a.shape[axis] - width + 1
+    count = total if count is None else min(count, total)
+    shape = (*a.shape[:axis], count, *a.shape[axis + 1:], width)
+    strides = (*a.strides, a.strides[axis])
+    return np.lib.stride_tricks.as_strided(a, shape, strides, writeable=False)
 
 
 def _pair_products(coef: Array) -> Array:
@@ -228,4 +240,4 @@ def _stretch(n: int, clamp: tuple[bool, bool]) -> tuple[Array, tuple[int, int]]:
     return coef, inner
 
 
-__all__ = ["HALF_WIDTH", "BandOps", "hold_runs", "spline_ops"]
+__all__ = ["HALF_WIDTH", "BandOps", "hold_runs", "spline_ops", "windows"]
