@@ -77,6 +77,7 @@ from camtraj.usd_shot import read_shot  # noqa: E402
 TARGET_FPS = 5000.0  # issue 7's target for sequential IK, default objective [frames/s]
 TARGET_CONVERT_S = 1.5  # issue 7's target for converting a one-minute shot, end to end [s]
 BASE_REV = "dcd02a3"  # the solver issue 13's rewrite is measured against (main before it)
+PAPER_REV = "d5b7e68^"  # the last revision before the shot objective (issue 13's paper goal)
 NUMBA_NOTE = ("numpy kept over numba: numba's JIT costs ~11 s per process (every farm task is a "
               "new process) and gained only 2.4x at >= 256 candidates per call; the whole-shot "
               "solver makes few large numpy calls instead.")
@@ -939,7 +940,50 @@ def bench_perf(robot: Robot, targets_1440: np.ndarray, rev: str, work: Path,
                                  "peak_bytes": results[0]["sizes"][n]["peak_bytes"]}
                              for n in results[0]["sizes"]}
             out[label] = best
+    out["paper_before"] = bench_paper_before(work, quick)
     return out
+
+
+_PAPER = """
+import json, sys, time
+import numpy as np
+from camtraj.ik import solve_path
+from camtraj.robot import Robot
+path = np.load(sys.argv[1])["n1440"]
+robot = Robot.default()
+solve_path(robot, path[:48], objective="paper", frame_interval=1.0 / 24.0)  # imports, caches
+walls = []
+for _ in range(int(sys.argv[3])):
+    t0 = time.perf_counter()
+    q = solve_path(robot, path, objective="paper", frame_interval=1.0 / 24.0)
+    walls.append(time.perf_counter() - t0)
+np.save(sys.argv[2], q)
+print(json.dumps({"paper_s": min(walls)}))
+"""
+
+
+def bench_paper_before(work: Path, quick: bool) -> dict[str, Any]:
+    """``paper`` on the 1440-frame path, this tree and :data:`PAPER_REV` (before the shot
+    objective) alternately in new processes: the faster run of each, and the largest
+    difference between their joint paths (the same answers are expected)."""
+    old, why = export_revision(PAPER_REV, work)
+    if old is None:
+        return {"error": why}
+    walls: dict[str, list[float]] = {"this tree": [], PAPER_REV: []}
+    paths: dict[str, Any] = {}
+    for r in range(2 if quick else 3):
+        for label, tree in (("this tree", ROOT), (PAPER_REV, old)):
+            log(f"table 5b: paper of {label} in a new process, run {r + 1}")
+            out = work / f"paper-{len(paths)}.npy"
+            proc = subprocess.run([sys.executable, "-c", _PAPER, str(work / "perf.npz"),
+                                   str(out), "2"], env=dict(os.environ, PYTHONPATH=str(tree)),
+                                  capture_output=True, text=True, check=False, cwd=str(work))
+            if proc.returncode != 0:
+                return {"error": f"{label}: {proc.stderr.strip()[-300:]}"}
+            walls[label].append(json.loads(proc.stdout.strip().splitlines()[-1])["paper_s"])
+            paths[label] = np.load(out)
+    return {"rev": PAPER_REV, **{k: min(v) for k, v in walls.items()},
+            "max_joint_difference": float(np.abs(paths["this tree"] - paths[PAPER_REV]).max())}
 
 
 def print_perf(res: dict[str, Any]) -> None:
@@ -979,8 +1023,20 @@ def print_perf(res: dict[str, Any]) -> None:
          "(tracemalloc peak, a separate call) on make_samples' long move spread over n frames; "
          "the trees run alternately (twice each, the faster run kept; once with --quick)",
          "the machine is shared: read the ratios (same run), not the absolute figures",
-         *([f"revision {rev}: {base['error'][:200]}"] if not have_base else [])],
+         *([f"revision {rev}: {base['error'][:200]}"] if not have_base else []),
+         _paper_before_note(res.get("paper_before"))],
     )
+
+
+def _paper_before_note(res: dict[str, Any] | None) -> str:
+    if not res:
+        return "paper before the shot objective: not measured"
+    if "error" in res:
+        return f"paper before the shot objective: {res['error'][:200]}"
+    rev, a, b = res["rev"], 1440 / res["this tree"], 1440 / res[res["rev"]]
+    return (f"paper against revision {rev} (the last before the shot objective), alternating new "
+            f"processes: {a:,.0f} vs {b:,.0f} frames/s, x{ratio(a, b):.3f}; largest joint "
+            f"difference between their paths {res['max_joint_difference']:.3g}")
 
 
 # ---------------------------------------------------------------------------------------------
