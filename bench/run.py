@@ -957,8 +957,9 @@ for _ in range(int(sys.argv[3])):
     t0 = time.perf_counter()
     q = solve_path(robot, path, objective="paper", frame_interval=1.0 / 24.0)
     walls.append(time.perf_counter() - t0)
-np.save(sys.argv[2], q)
-print(json.dumps({"paper_s": min(walls)}))
+np.save(sys.argv[2] + ".npy", q)
+with open(sys.argv[2] + ".json", "w") as f:
+    json.dump({"paper_s": min(walls)}, f)
 """
 
 
@@ -974,14 +975,18 @@ def bench_paper_before(work: Path, quick: bool) -> dict[str, Any]:
     for r in range(2 if quick else 3):
         for label, tree in (("this tree", ROOT), (PAPER_REV, old)):
             log(f"table 5b: paper of {label} in a new process, run {r + 1}")
-            out = work / f"paper-{len(paths)}.npy"
+            out = work / f"paper-{label.replace(' ', '-')}-{r}"
             proc = subprocess.run([sys.executable, "-c", _PAPER, str(work / "perf.npz"),
                                    str(out), "2"], env=dict(os.environ, PYTHONPATH=str(tree)),
                                   capture_output=True, text=True, check=False, cwd=str(work))
-            if proc.returncode != 0:
-                return {"error": f"{label}: {proc.stderr.strip()[-300:]}"}
-            walls[label].append(json.loads(proc.stdout.strip().splitlines()[-1])["paper_s"])
-            paths[label] = np.load(out)
+            try:
+                if proc.returncode != 0:
+                    raise ValueError(proc.stderr.strip()[-300:])
+                walls[label].append(float(json.loads(
+                    out.with_suffix(".json").read_text())["paper_s"]))
+                paths[label] = np.load(out.with_suffix(".npy"))
+            except (OSError, ValueError, KeyError) as exc:
+                return {"error": f"{label}: {exc}"}
     return {"rev": PAPER_REV, **{k: min(v) for k, v in walls.items()},
             "max_joint_difference": float(np.abs(paths["this tree"] - paths[PAPER_REV]).max())}
 

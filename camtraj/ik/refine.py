@@ -325,10 +325,10 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
     ex = p / order
     c = s ** order
     lim = np.stack([(cost.vel, cost.acc, cost.jerk)[k - 1] for k in ops.orders], axis=-1)
-    a, below = scaled.a, scaled.below  # a^(ex - 2)
+    below = scaled.below  # a^(ex - 2), a = |z| / c
     dz = below * use.z * (kappa * ex / (c * c * lim))  # a^(ex - 1) sign(z) = a^(ex - 2) z / c
-    if floor > 0.0:
-        below = np.where(a >= floor, below, floor ** (ex - 2.0))
+    if floor > 0.0:  # max(a, floor)^(ex - 2): the power is monotone (ex >= 2 in every stage)
+        below = np.maximum(below, floor ** (ex - 2.0))
     w = below * (kappa * ex * (ex - 1.0) / (c * c * lim * lim))
     _gather(ops, dz, w, gq, M, pad)
     if use.ends is not None:  # the ends' stopping needs: one row per end and axis

@@ -178,12 +178,11 @@ class TakeUse:
 @dataclass(frozen=True)
 class ScaledUse:
     """A :class:`TakeUse`'s usages z (rows, 8, k) of order k scaled for a power mean at
-    ``power`` and ``scale``: a = |z| / scale^k, whose power ex = power / k is the term of
-    the sum; ``below`` = a^(ex - 2), from which the term (a^2 below), its slope (a below)
-    and its curvature (below) follow; ``phi`` the sum of the terms, the ends' stopping needs
-    included."""
+    ``power`` and ``scale``: with a = |z| / scale^k, the term of the sum is a^ex for
+    ex = power / k; ``below`` = a^(ex - 2) gives its slope (a^(ex - 1) sign(z) = below z /
+    scale^k) and curvature (below); ``phi`` is the sum of the terms, the ends' stopping
+    needs included."""
 
-    a: Array
     below: Array
     phi: float
 
@@ -191,15 +190,16 @@ class ScaledUse:
     def of(cls, use: TakeUse, power: float, scale: float) -> ScaledUse:
         k = np.asarray(use.ops.orders, dtype=float)
         ex = power / k
-        if ex.min() < 2.0:
-            msg = f"the power mean's power {power:g} is below twice the highest order {k.max():g}"
-            raise ValueError(msg)
         a = np.abs(use.z) / scale ** k
         below = powers(a, ex - 2.0)
-        phi = float((below * a * a).sum())
+        # a^ex from a^(ex - 2) (one pass of powers); below a power of 2 the curvature is
+        # unbounded at a = 0 and the sum is taken directly
+        terms = below * a * a if ex.min() >= 2.0 else powers(a, ex)
+        phi = float(terms.sum())
         if use.ends is not None:
             phi += float(((use.ends[0] / scale) ** power).sum())
-        return cls(a, below, phi)
+        below.setflags(write=False)
+        return cls(below, phi)
 
 
 @dataclass(frozen=True)
