@@ -179,7 +179,6 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
 def test_refinement_never_slows_the_take(robot: Robot, n: int) -> None:
     """The refined take is at least as fast as the dynamic programme's, as the timing stage
     measures it; it moved off the grid; every frame still reaches its pose exactly."""
-
     targets = camera_path(robot, n)
     cost = ShotCost.for_robot(robot, 1.0 / 24.0)
     cand = candidates(robot, targets, n_track=2, n_extend=2)

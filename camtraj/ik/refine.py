@@ -440,7 +440,7 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
             continue
         # rows with their own weights (near the ends): row r gives frame r + o the tap
         # coef[r, o] dz[r] and the pair (r + o, r + o + d) coef[r, o] coef[r, o + d] w[r],
-        # one batched product per row, then one shifted add per tap
+        # one batched product per row, then every (row, tap) summed per frame at once
         f0 = base + lo
         span = hi - lo + width - 1
         taps = coef[lo:hi] @ dz[lo:hi].transpose(0, 2, 1)  # (rows, width, 8)
