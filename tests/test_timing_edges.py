@@ -193,6 +193,31 @@ def test_moves_ending_in_motion_near_a_limit_convert_with_scale(
     assert str(err).endswith("try --timing scale")
 
 
+@pytest.mark.parametrize(("axis", "toward_upper"), [(TRACK, True), (EXTEND, False)])
+def test_the_slowest_take_whose_run_out_fits_stops_inside_the_limit(
+    limits: Limits, axis: int, toward_upper: bool
+) -> None:
+    """A move still speeding towards a limit at its last frame, from rest: scale
+    timing slows it until the run-out's stop fits before the limit, and at that factor the
+    stop ends inside it, not on it plus round-off (with a 1e-9 relative tolerance in the
+    room check, moves like these stopped up to 1.5e-8 m past the limit)."""
+    n, slowed = 25, 0
+    # from rest, speeding up to 1.5 (track) or 1.2 m/s (extend) at the last frame: stops
+    # longer than the room
+    travel = 0.75 if toward_upper else 0.6
+    for room in np.linspace(0.05, 0.3, 13):
+        for fps in (24.0, 25.0):
+            q = np.tile([5.0, 0.0, 0.0, 0.6, -1.5, 0.0, 0.0, 0.0], (n, 1))
+            end = limits.upper[axis] - room if toward_upper else limits.lower[axis] + room
+            left = 1.0 - np.linspace(0.0, 1.0, n) ** 2  # of the travel
+            q[:, axis] = end - travel * left if toward_upper else end + travel * left
+            take = time_shot(q, np.arange(n) / fps, limits, mode="scale")
+            slowed += take.speed_factor > 1.0  # the room decides it
+            assert np.all(take.q <= limits.upper) and np.all(take.q >= limits.lower), (
+                room, fps)
+    assert slowed == 26
+
+
 @pytest.mark.parametrize(("gap", "axis", "side"), [(0.0, ELBOW, -1), (1e-7, LIFT, +1)])
 def test_an_axis_on_its_limit_moving_into_it_needs_another_ik_answer(
     limits: Limits, gap: float, axis: int, side: int

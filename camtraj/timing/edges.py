@@ -29,6 +29,9 @@ REST_RTOL = 1e-9
 EDGE_MODES: tuple[str, ...] = ("gentle", "fast")
 #: Gentle edges may always use this fraction of an axis's acceleration and jerk limits.
 GENTLE_FLOOR = 0.25
+#: How many units in the last place of a position limit a run-up or run-out that travels
+#: towards it stops inside it (:func:`room_problem`): its samples' round-off.
+EDGE_GUARD = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,6 +87,9 @@ class _Move:
             raise TimingLimitError(msg)
         self._traj = traj
         self._stop = stop
+        # the positions the move was given (the shot's frame, and the start position)
+        given = np.array([current[0]] if stop else [current[0], target[0]], dtype=np.float64)
+        self.given_min, self.given_max = given.min(axis=0), given.max(axis=0)
         self.duration = float(traj.duration)
         rest = traj.at_time(self.duration)[0] if stop else current[0]
         self.rest_position = np.array(rest, dtype=np.float64)
@@ -280,9 +286,18 @@ def velocity_problem(v: Array, a: Array, limits: Limits, side: str,
 
 
 def room_problem(move: _Move, limits: Limits, side: str, frame: int) -> EdgeProblem | None:
-    """The move if it needs room beyond a position limit."""
-    tol = LIMIT_RTOL * (limits.upper - limits.lower)
-    over = np.flatnonzero((move.max > limits.upper + tol) | (move.min < limits.lower - tol))
+    """The move if it needs room beyond a position limit.
+
+    Strictly: a move that travels towards a limit must end :data:`EDGE_GUARD` ulps of the
+    limit inside it (its servo samples, evaluated from the same phases, then stay inside; a
+    1e-9 relative tolerance here let the slowest fitting take stop 9e-9 m past the track's
+    end); one given a position on a limit, or past it by round-off (a frame the IK put
+    there, a velocity of 1e-17 into it), may go no further than round-off.
+    """
+    guard = EDGE_GUARD * np.spacing(np.maximum(np.abs(limits.upper), np.abs(limits.lower)))
+    top = np.maximum(limits.upper - guard, move.given_max + guard)
+    bottom = np.minimum(limits.lower + guard, move.given_min - guard)
+    over = np.flatnonzero((move.max > top) | (move.min < bottom))
     if over.size == 0:
         return None
     revolute = limits.revolute
