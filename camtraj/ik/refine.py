@@ -155,7 +155,11 @@ class Refinement:
         peak = self.cost.peak(self.y[:, :8])
         if not peak > 0.0:  # the robot stands still the whole shot: no peak to lower
             return
-        stage = replace(self.cost, power=power, scale=max(peak, 1e-6))
+        # the ends' room joins the take's uses after the first stage, which settles the basin
+        # (with it, a stop's barrier at its limit steered some first stages into slower
+        # basins: a truck ending in motion 3.39x -> 3.10x real time)
+        stage = replace(self.cost, power=power, scale=max(peak, 1e-6),
+                        room=self.stages_done > 1)
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
                                            loosen * self.tolerance, self.mu, floor, self.tie)
@@ -331,20 +335,18 @@ def _normal_equations(cost: ShotCost, y: Array, grad_y: Array, floor: float = 0.
         below = np.maximum(below, floor ** (ex - 2.0))
     w = below * (kappa * ex * (ex - 1.0) / (c * c * lim * lim))
     _gather(ops, dz, w, gq, M, pad)
-    if use.ends is not None:  # the ends' stopping needs: one row per end and axis
-        need, d1, d2, rows = use.ends
+    if use.ends is not None:  # the ends' needs: one row per need and axis
+        need, lins, frames = use.ends
         a = need / s
         f1 = kappa * p * a ** (p - 1.0) / s
         f2 = kappa * p * (p - 1.0) * a ** (p - 2.0) / (s * s)
         off = ops.offset
-        for end, row in ((0, 0), (1, n - 1)):
-            # d need / d q[f] per axis: (width, 8)
-            lin = (rows[end, 0][:, None] * (d1[end] / cost.vel)
-                   + rows[end, 1][:, None] * (d2[end] / cost.acc))
-            lo = pad + row + off
-            gq[lo:lo + lin.shape[0]] += lin * f1[end]
+        for k in range(need.shape[0]):
+            lin = lins[k]  # d need / d q[f] per axis: (width, 8)
+            lo = pad + int(frames[k]) + off
+            gq[lo:lo + lin.shape[0]] += lin * f1[k]
             first, d = _upper_pairs(lin.shape[0])  # frames lo + first and lo + first + d
-            M[d, lo + first] += lin[first] * lin[first + d] * f2[end]
+            M[d, lo + first] += lin[first] * lin[first + d] * f2[k]
     # the peak norm's gradient alone: its concave outer root adds -c w w^T to the curvature
     g_peak = np.einsum("ki,kip->kp", gq[pad:pad + n], G)
     concave = (1.0 - 1.0 / p) / max(kappa * phi, 1e-300)

@@ -8,7 +8,8 @@ use of the limits,
 (velocity scales with the speed of the take, acceleration with its square, jerk with its
 cube), taken along the spline the timing stage moves on (:mod:`camtraj.ik.spline_ops`), with
 the ends' stopping needs (a shot that ends still accelerating needs a slower take for its
-run-out to stay under the velocity limit). The solver works in two passes:
+run-out to stay under the velocity limit; one that ends moving towards a position limit needs
+a take slow enough to stop before it). The solver works in two passes:
 
 * The dynamic programme chooses one candidate per frame by frame-to-frame differences, with
   per-axis velocity usages z1 = dq / (v_max dt):
@@ -30,7 +31,9 @@ run-out to stay under the velocity limit). The solver works in two passes:
 The first frame carries no motion term: the run-up brings the robot there, whatever the start.
 A shot that starts or ends in motion needs room for its run-up and run-out: the first and last
 frames' positions pushed out by each axis's stopping distance at its edge velocity (at the
-speed the take will run at) carry the margin cost, and a steep cost past a limit.
+speed the take will run at) carry the margin cost, and a steep cost past a limit; from the
+refinement's second stage on, the slow-down that stop needs to fit before the limit is one of
+the take's uses (:meth:`ShotCost.room_needs`).
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from camtraj.ik.spline_ops import BandOps, spline_ops
 from camtraj.robot import PRISMATIC, REVOLUTE, Robot
 
 Array = NDArray[np.float64]
+IntArray = NDArray[np.intp]
 
 TWO_PI = 2.0 * math.pi
 N_MEASURES = 10  # the 8 joints, the wrist singularity distance, the full-stretch distance
@@ -137,13 +141,15 @@ def _stop_root(a1: Array, g: Array) -> Array:
 class TakeUse:
     """A path's use of the limits: the spline's velocity, acceleration and jerk usages
     (:mod:`camtraj.ik.spline_ops`) at every knot and piece middle over the limits per frame
-    interval, ``z`` (rows, 8, k) read by the operators ``ops``, and the ends' stopping needs
-    (:meth:`ShotCost.edge_needs`: need, d need / d z1, d need / d z2, and the operator rows
-    (2 ends, velocity / acceleration, width) they are read with), None below 3 frames."""
+    interval, ``z`` (rows, 8, k) read by the operators ``ops``, and the ends' needs, None
+    below 3 frames: each a slow-down the take needs at one end, as a usage (m, 8)
+    (:meth:`ShotCost.edge_needs`: the stop under the velocity limit; with
+    ``ShotCost.room``, :meth:`ShotCost.room_needs`: the stop inside the position limits),
+    its derivatives in the frames an operator row reads (m, width, 8) and that row (m,)."""
 
     ops: BandOps
     z: Array
-    ends: tuple[Array, Array, Array, Array] | None
+    ends: tuple[Array, Array, IntArray] | None
     _scaled: dict[tuple[float, float], ScaledUse] = field(
         default_factory=dict, init=False, repr=False, compare=False)
 
@@ -196,8 +202,9 @@ class ScaledUse:
         # unbounded at a = 0 and the sum is taken directly
         terms = below * a * a if ex.min() >= 2.0 else powers(a, ex)
         phi = float(terms.sum())
-        if use.ends is not None:
-            phi += float(((use.ends[0] / scale) ** power).sum())
+        if use.ends is not None:  # a trial step that stops past a limit: inf, rejected
+            with np.errstate(over="ignore"):
+                phi += float(((use.ends[0] / scale) ** power).sum())
         below.setflags(write=False)
         return cls(below, phi)
 
@@ -218,6 +225,8 @@ class ShotCost:
             frame's squared margin intrusions (relative to the peak use), of the steep part
             of a zone, and of the mean F per step.
         power, scale: The refinement's power mean of the take's uses.
+        room: Whether the ends' room to their position limits is among the take's uses
+            (:meth:`room_needs`; the refinement adds it from its second stage on).
         holds: The frames (first, last) where the camera, and so the robot, holds still
             (:func:`~camtraj.ik.spline_ops.hold_runs`): the take's spline is clamped to rest
             next to them, as the timing stage fits it.
@@ -242,6 +251,7 @@ class ShotCost:
     power: float = 8.0
     scale: float = 1.0
     holds: tuple[tuple[int, int], ...] = ()
+    room: bool = True
 
     @classmethod
     def for_robot(cls, robot: Robot, dt: float) -> ShotCost:
@@ -271,9 +281,56 @@ class ShotCost:
         lims = np.stack([(self.vel, self.acc, self.jerk)[k - 1] for k in ops.orders], axis=-1)
         z = ops.apply(q) / lims
         vel_z, acc_z = z[[0, -1], :, 0], z[[0, -1], :, 2]  # order 1 and 2 at the knots
-        need = self.edge_needs(vel_z, acc_z)
+        need, d1, d2 = self.edge_needs(vel_z, acc_z)
         rows = np.stack([ops.coef[[0, 0], :, [0, 2]], ops.coef[[-1, -1], :, [0, 2]]])
-        return TakeUse(ops, z, (*need, rows))
+        lin = (rows[:, 0, :, None] * (d1 / self.vel)[:, None, :]
+               + rows[:, 1, :, None] * (d2 / self.acc)[:, None, :])
+        if not self.room:
+            return TakeUse(ops, z, (need, lin, np.array([0, n - 1], dtype=np.intp)))
+        room, room_lin = self.room_needs(q[[0, -1]], vel_z, rows[:, 0], -ops.offset)
+        return TakeUse(ops, z, (np.concatenate([need, room]), np.concatenate([lin, room_lin]),
+                                np.array([0, n - 1, 0, n - 1], dtype=np.intp)))
+
+    def room_needs(self, q_ends: Array, z1: Array, vel_rows: Array,
+                   at: int) -> tuple[Array, Array]:
+        """The slow-down each end's stop needs to fit between the end frame and the position
+        limit ahead of it (the run-out's; the run-up's behind the first frame), as a usage.
+
+        At real time an axis leaves its last frame at speed V = |z1| v_max; from speed V / s
+        it stops within D(V / s) (:meth:`stop_distance`, the robot's own acceleration and
+        jerk: the timing stage's run-out where its room decides the speed), so the room R to
+        the limit allows s >= V / D^-1(R). A take slowed down to fit its run-out is as slow as
+        one slowed down for a velocity limit, so this need is a use like the others: the
+        objective weighs it against the rest of the take instead of taking a stop past a
+        limit at the aimed speed as a failure (a truck ending at the arm's full reach past the
+        track's end: 0.22x real time, slower than ``paper``'s 0.28x; with this need 0.34x).
+        R = 0 with the axis moving into its limit: no slow-down fits (a need of ~1e4 and up).
+
+        Args:
+            q_ends: The first and last frames' positions (2, 8).
+            z1: The spline's velocity usages there (2, 8).
+            vel_rows: The operator rows that read z1 (2, width), times the velocity limit.
+            at: The end frame's column in those rows.
+
+        Returns:
+            The needs (2, 8) and their derivatives in the frames the rows read (2, width, 8).
+        """
+        sgn = np.sign(z1)
+        ahead = np.array([[-1.0], [1.0]]) * sgn  # the run-up's stop is behind its frame
+        room = np.where(ahead > 0, self.upper - q_ends, q_ends - self.lower)
+        room = np.maximum(room, 1e-12)
+        a, j = self.a_max, self.j_max
+        small = room <= a ** 3 / (j * j)
+        v_room = np.where(small, np.cbrt(room * room * j),
+                          np.sqrt(a ** 4 / (4.0 * j * j) + 2.0 * a * room) - a * a / (2.0 * j))
+        dd = np.where(small, 1.5 * np.sqrt(v_room / j), v_room / a + 0.5 * a / j)  # dD/dV
+        v_max = self.vel / self.dt
+        need = np.abs(z1) * v_max / v_room
+        d_z1 = sgn * v_max / v_room
+        d_room = -need / (v_room * dd)
+        lin = vel_rows[:, :, None] * (d_z1 / self.vel)[:, None, :]
+        lin[:, at, :] += d_room * -ahead  # dR/dq: -1 towards the upper limit
+        return need, lin
 
     def edge_needs(self, z1: Array, z2: Array) -> tuple[Array, Array, Array]:
         """The slow-down each end's stop needs to stay under the velocity limit, as a usage.
