@@ -530,6 +530,26 @@ def _designs() -> list[Design]:
 
     d.append(Design("handheld push to a table 5 s (Z-up cm, 24 fps, matrix)", handheld_push,
                     5.0, 24.0, "Z", 0.01, matrix=True))
+
+    def reach_truck(t: Array, u: Array) -> Cam:
+        # away from rest to 1.5 m/s in a second, then on at that speed to the last frame at
+        # camera x = 19.7 m, 5.7 m past the track's end (the arm reaches on): the track and
+        # the extend both end near their limits, still moving, and only the run-out's room
+        # decides the speed
+        v = 1.5 * np.clip(t, 0.0, 1.0)
+        x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+        pos = np.stack([19.7 - x[-1] + x, np.full_like(t, -1.0), np.full_like(t, 1.3)], axis=1)
+        return Cam(pos, np.full_like(t, 90.0), np.full_like(t, -3.0))
+
+    d.append(Design("truck ends moving at the arm's full reach 8 s (Z-up m)", reach_truck,
+                    8.0, 24.0))
+
+    def crane_down_at_end(t: Array, u: Array) -> Cam:  # still craning and panning at the end
+        pos = _line(u, (16.8, -0.4, 1.9), (17.6, -0.4, 0.9))
+        return Cam(pos, -20.0 + 50.0 * u, -25.0 + 20.0 * u)
+
+    d.append(Design("crane down and pan ending in motion at the track's end 0.8 s (Y-up cm, "
+                    "25 fps)", crane_down_at_end, 0.8, 25.0, "Y", 0.01))
     return d
 
 
