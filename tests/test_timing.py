@@ -443,7 +443,10 @@ def test_runup_needing_room_beyond_a_limit_is_reported(limits: Limits) -> None:
     q = np.tile(HOME, (n, 1))
     lower = float(limits.lower[TRACK])
     q[:, TRACK] = lower + 0.01 + 1.5 * t  # starts 1 cm from the end of the track at 1.5 m/s
-    with pytest.raises(TimingLimitError, match=r"run-up into frame 0 .*track goes to -2\.\d+ m"):
+    # the distance past the limit (0.575 m of stop from 1.5 m/s, 1 cm of room), not the
+    # position rounded next to the limit's
+    with pytest.raises(TimingLimitError, match=r"run-up into frame 0 .*track goes 0\.5\d+ m "
+                                               r"past its lower limit -2 m"):
         time_shot(q, t, limits, edges="fast")
 
 

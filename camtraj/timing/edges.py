@@ -303,14 +303,15 @@ def room_problem(move: _Move, limits: Limits, side: str, frame: int) -> EdgeProb
     revolute = limits.revolute
     parts = []
     for j in over.tolist():
-        beyond_upper = move.max[j] > limits.upper[j]
-        value = move.max[j] if beyond_upper else move.min[j]
-        bound = limits.upper[j] if beyond_upper else limits.lower[j]
-        parts.append(
-            f"{limits.names[j]} goes to {fmt(float(value), 'position', bool(revolute[j]))}, "
-            f"beyond its {'upper' if beyond_upper else 'lower'} limit "
-            f"{fmt(float(bound), 'position', bool(revolute[j]))}"
-        )
+        upper = bool(move.max[j] > top[j])
+        rev = bool(revolute[j])
+        bound = float(limits.upper[j] if upper else limits.lower[j])
+        past = float(move.max[j] - bound if upper else bound - move.min[j])
+        # the distance past the limit, not the position: rounded alike, the two read the same
+        where = (f"goes {fmt(past, 'position', rev)} past" if past > 0.0 else
+                 f"stops {fmt(-past, 'position', rev)} short of" if past < 0.0 else "reaches")
+        parts.append(f"{limits.names[j]} {where} its {'upper' if upper else 'lower'} limit "
+                     f"{fmt(bound, 'position', rev)}")
     text = (
         f"the {side} {'into' if side == 'run-up' else 'from'} frame {frame} "
         f"({move.duration:.2f} s) needs more room: " + "; ".join(parts)
