@@ -193,18 +193,6 @@ def _solve_sequence(robot: Robot, Ts: Array, first: Array, frames: NDArray[np.in
     return q
 
 
-#: Short shots (at most this many candidate frames on the fine grid: track samples 2t - 1,
-#: extend samples 2e, 7 x 4 by default, so up to 48 frames) also start from the fine grid's
-#: cheapest path. The programme's proxy ranks basins by frame-to-frame differences, and on
-#: short moves ending in motion the coarse grids' paths can all sit in slow basins (a
-#: 21-frame crane-down ending at the track's end: 1.95x real time from the coarse grids,
-#: 2.59x from the fine one, 2.57x at 10x the effort). On longer shots the fine start, when it
-#: competes, runs every stage again: 1.35-2.3x the CPU on the 96-120-frame samples, for a
-#: gain measured on one of 40 shots (a 193-frame truck ending past the track's end, 0.90 ->
-#: 1.00 of 10x the effort), so it stays within the 12-48-frame moves issue 13 names.
-FINE_GRID_FRAMES = 48 * 28
-
-
 def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
                frames: NDArray[np.int_],
                progress: Callable[[int], None] | None = None) -> Array:
@@ -215,8 +203,7 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     candidate grid, the cheapest path of each arm configuration (rotate towards or away
     from the target, elbow up or down: the proxy often ranks them wrongly, most of all when
     the shot is faster than the robot), and on the grid with half the track values its
-    cheapest (a different set of points, so another basin where the proxy misleads), and on
-    a short shot the same on the finer grid (:data:`FINE_GRID_FRAMES`). Each
+    cheapest (a different set of points, so another basin where the proxy misleads). Each
     runs the continuation's first stage, which settles the basin; the fastest take, as the
     timing stage measures it, runs the remaining stages (with every start within
     :data:`CLOSE_STARTS` of it, and the grids' own cheapest answers as they would without
@@ -234,10 +221,8 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     def take_speed(q: Array) -> float:  # to compare answers: a thousandth is plenty
         return feasible_speed(q, times, limits, precision=1e-3) if n > 1 else math.inf
 
-    fine = (2 * s.track_samples - 1, 2 * s.extend_samples)
     grids = dict.fromkeys([(s.track_samples, s.extend_samples),
-                           (max(1, s.track_samples // 2), s.extend_samples)]
-                          + ([fine] if n * fine[0] * fine[1] <= FINE_GRID_FRAMES else []))
+                           (max(1, s.track_samples // 2), s.extend_samples)])
     total = 2 * len(grids) + REFINE_STAGES - 1
     done = [0]
 
