@@ -543,13 +543,6 @@ def _designs() -> list[Design]:
 
     d.append(Design("truck ends moving at the arm's full reach 8 s (Z-up m)", reach_truck,
                     8.0, 24.0))
-
-    def crane_down_at_end(t: Array, u: Array) -> Cam:  # still craning and panning at the end
-        pos = _line(u, (16.8, -0.4, 1.9), (17.6, -0.4, 0.9))
-        return Cam(pos, -20.0 + 50.0 * u, -25.0 + 20.0 * u)
-
-    d.append(Design("crane down and pan ending in motion at the track's end 0.8 s (Y-up cm, "
-                    "25 fps)", crane_down_at_end, 0.8, 25.0, "Y", 0.01))
     return d
 
 
