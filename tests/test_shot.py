@@ -379,6 +379,8 @@ def test_room_need_is_the_slow_down_whose_stop_ends_on_the_limit(robot: Robot) -
             room = (robot.upper[axis] - q[frame, axis] if ahead > 0
                     else q[frame, axis] - robot.lower[axis])
             assert stop == pytest.approx(room, rel=1e-9), (end, axis)
+    rooms = np.outer([1e-6, 1e-3, 0.05, 0.5, 3.0], np.ones(8))  # both branches of the stop
+    np.testing.assert_allclose(cost.stop_distance(cost.stop_speed(rooms))[0], rooms, rtol=1e-12)
     h = 1e-6
     off = use.ops.offset
     for e in (2, 3):

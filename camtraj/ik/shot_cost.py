@@ -304,7 +304,8 @@ class ShotCost:
         objective weighs it against the rest of the take instead of taking a stop past a
         limit at the aimed speed as a failure (a truck ending at the arm's full reach past the
         track's end: 0.22x real time, slower than ``paper``'s 0.28x; with this need 0.34x).
-        R = 0 with the axis moving into its limit: no slow-down fits (a need of ~1e4 and up).
+        R = 0 with the axis moving into its limit: no slow-down fits (R is floored at 1e-12,
+        a need in the millions).
 
         Args:
             q_ends: The first and last frames' positions (2, 8).
@@ -318,12 +319,8 @@ class ShotCost:
         sgn = np.sign(z1)
         ahead = np.array([[-1.0], [1.0]]) * sgn  # the run-up's stop is behind its frame
         room = np.where(ahead > 0, self.upper - q_ends, q_ends - self.lower)
-        room = np.maximum(room, 1e-12)
-        a, j = self.a_max, self.j_max
-        small = room <= a ** 3 / (j * j)
-        v_room = np.where(small, np.cbrt(room * room * j),
-                          np.sqrt(a ** 4 / (4.0 * j * j) + 2.0 * a * room) - a * a / (2.0 * j))
-        dd = np.where(small, 1.5 * np.sqrt(v_room / j), v_room / a + 0.5 * a / j)  # dD/dV
+        v_room = self.stop_speed(np.maximum(room, 1e-12))
+        dd = self.stop_distance(v_room)[1]  # dD/dV there
         v_max = self.vel / self.dt
         need = np.abs(z1) * v_max / v_room
         d_z1 = sgn * v_max / v_room
@@ -454,6 +451,16 @@ class ShotCost:
         d = np.where(big, 0.5 * v * (v / a + a / j), v * root)
         dd = np.where(big, v / a + 0.5 * a / j, 1.5 * root)
         return np.asarray(d), np.asarray(dd)
+
+    def stop_speed(self, room: Array) -> Array:
+        """The highest speed (..., 8) from which each axis stops within ``room`` >= 0 [m,
+        rad]: :meth:`stop_distance` inverted (below a_max^2 / j_max the stop never reaches
+        a_max: D = v sqrt(v / j); above, D = v^2 / 2a + v a / 2j)."""
+        a, j = self.a_max, self.j_max
+        small = room <= a ** 3 / (j * j)  # the distance of the stop from v = a^2 / j
+        return np.asarray(np.where(
+            small, np.cbrt(room * room * j),
+            np.sqrt(a ** 4 / (4.0 * j * j) + 2.0 * a * room) - a * a / (2.0 * j)))
 
     def edge_excursion(self, q_edge: Array, q_inner: Array,
                        slow: float = 1.0) -> tuple[Array, Array]:
