@@ -118,8 +118,10 @@ class _Main(click.Group):
             sys.stdout.flush()
         except KeyboardInterrupt as exc:
             stopped(exc, ctx.invoked_subcommand)
-        except OSError as exc:  # stdout is a full disk, /dev/full or a closed pipe
-            _stdout_failed(exc)
+        except OSError as exc:
+            if exc.filename is not None:  # a named file, not standard output
+                _file_failed(exc)
+            _stdout_failed(exc)  # stdout is a full disk, /dev/full or a closed pipe
         return result
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
@@ -181,6 +183,17 @@ def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
         logging.getLogger("camtraj").warning("%s", text)
     with contextlib.suppress(OSError, ValueError):
         _HELD_LOG.flush()
+
+
+def _file_failed(exc: OSError) -> NoReturn:
+    """One line and exit 1 for a file a command did not expect to fail (a file of camtraj's
+    own installation gone, say): the file and the reason, not a traceback."""
+    reason, name = exc.strerror or str(exc), exc.filename
+    name = os.fsdecode(name) if isinstance(name, (str, bytes, os.PathLike)) else str(name)
+    with contextlib.suppress(OSError, ValueError):
+        click.echo(f"ERROR: cannot use {one_line(name)}: "
+                   f"{reason[:1].lower()}{reason[1:]}", err=True)
+    sys.exit(1)
 
 
 def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:

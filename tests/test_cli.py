@@ -482,3 +482,27 @@ def test_an_output_named_for_another_format_is_warned(tmp_path: Path) -> None:
     assert again.returncode == 0, again.stderr
     assert "does not end in .html" in again.stderr
     assert page.read_text(encoding="utf-8").lstrip().lower().startswith("<!doctype html")
+
+
+def test_a_failing_file_is_named_not_taken_for_standard_output(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        tmp_path: Path) -> None:
+    """An OSError about a named file that escapes a command (a file of the installation gone,
+    say) is one line naming that file, exit 1, not "cannot write to standard output"."""
+    import errno
+
+    import camtraj.mcap_io
+
+    gone = tmp_path / "camtraj" / "data" / "ShotFrame.msg"
+
+    def describe(path: str) -> dict[str, Any]:
+        raise FileNotFoundError(errno.ENOENT, "No such file or directory", str(gone))
+
+    monkeypatch.setattr(camtraj.mcap_io, "describe", describe)
+    take = tmp_path / "take.mcap"
+    take.write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(SystemExit) as stop:
+        cli_main.main(["info", str(take)], prog_name="camtraj")
+    assert stop.value.code == 1
+    err = capsys.readouterr().err
+    assert err == f"ERROR: cannot use {gone}: no such file or directory\n"
