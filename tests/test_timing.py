@@ -178,7 +178,7 @@ def test_a_servo_rate_far_from_the_one_asked_is_said(limits: Limits) -> None:
     assert not any("servo rate" in w for w in near.report.warnings)
     far = time_shot(q, t, limits, rate=10.0)
     assert far.rate == pytest.approx(24.0)
-    assert ("servo rate 24 Hz, not the 10 Hz asked: every film frame is a servo tick, so the "
+    assert ("servo rate 24 Hz, not 10 Hz (--rate): every film frame is a servo tick, so the "
             "rate is a whole number of ticks per frame interval") in far.report.warnings
 
 

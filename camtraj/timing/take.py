@@ -325,7 +325,7 @@ def time_shot(
         uniform = True
         if abs(eff_rate - rate) > RATE_NOTE * rate:
             warnings.append(
-                f"servo rate {eff_rate:.4g} Hz, not the {rate:.4g} Hz asked: every film frame "
+                f"servo rate {eff_rate:.4g} Hz, not {rate:.4g} Hz (--rate): every film frame "
                 "is a servo tick, so the rate is a whole number of ticks per frame interval")
     # Run-up, shot and run-out joined a quantity at a time, each of the shot's dropped once
     # joined: the shot's samples and the take's are never both whole in memory.
