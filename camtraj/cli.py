@@ -34,7 +34,7 @@ from camtraj.errors import (
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
-from camtraj.shown import edge_use, percent, seconds, servo, speed_percent
+from camtraj.shown import edge_use, frame_rate, percent, seconds, servo, speed_percent
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -491,12 +491,6 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
     }
 
 
-def _floor(x: float, digits: int) -> str:
-    """Rounded down, so a speed that is said to fit does fit."""
-    scale = 10.0**digits
-    return f"{math.floor(x * scale) / scale:.{digits}f}"
-
-
 MAX_SHOWN_SPEED = 100.0
 """Above this many times real time the report says ">10000%" (the number means nothing)."""
 
@@ -507,10 +501,10 @@ def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float)
         return "unbounded (the camera pose never changes)"
     if max_speed > MAX_SHOWN_SPEED:
         return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
-                f"{_floor(MAX_SHOWN_SPEED * fps, 0)} fps)")
+                f"{frame_rate(MAX_SHOWN_SPEED * fps, 0)} fps)")
     shown = feasible_fps if feasible_fps is not None else max_speed * fps
     return (f"{speed_percent(max_speed)} of real time "
-            f"(could be shot at {_floor(shown, 2)} fps)")
+            f"(could be shot at {frame_rate(shown)} fps)")
 
 
 def _verdict(r: dict[str, Any]) -> str:

@@ -12,8 +12,8 @@ import math
 from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "percent", "seconds", "servo",
-           "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "percent", "seconds",
+           "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -62,6 +62,12 @@ def speed_percent(x: float) -> str:
     decimals = 1 - math.floor(math.log10(p))
     shown = math.floor(p * 10 ** decimals * (1.0 + 1e-12)) / 10 ** decimals  # 0.29, not 0.28999
     return f"{shown:.{decimals}f}%"
+
+
+def frame_rate(fps: float, digits: int = 2) -> str:
+    """A frame rate a take fits at, rounded down (a rate said to fit does fit): '19.06'."""
+    scale = 10.0**digits
+    return f"{math.floor(fps * scale * (1.0 + 1e-12)) / scale:.{digits}f}"
 
 
 def edge_use(runup: Mapping[str, Mapping[str, float]], runout: Mapping[str, Mapping[str, float]],

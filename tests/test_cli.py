@@ -198,6 +198,7 @@ def cli(tmp_path_factory: pytest.TempPathFactory) -> CliRuns:
         "placed_yaw": ["convert", MAYA, "-o", base / "placed_yaw.mcap", "--placement",
                        ",".join(str(v) for v in PLACEMENT_YAW), "--timing", "scale", "-q"],
     }
+    jobs["convert_whip"] = ["convert", WHIP, "-o", base / "whip.mcap", "-q"]
     cwds: dict[str, Path] = {}
     for key, (shot, extra) in CHECKS.items():
         cwds[key] = base / key
@@ -275,6 +276,20 @@ def test_check_whip_pan_reports_limits_and_exits_3(cli: CliRuns) -> None:
     for v in rep["violations"]:
         assert v["ratio"] > 1.0 and v["limit"] > 0.0 and abs(v["peak"]) > v["limit"]
     _assert_wrote_nothing(cli, "check_whip_json")
+
+
+def test_check_and_convert_give_the_speed_that_fits_alike(cli: CliRuns) -> None:
+    """check's "could be shot at 6.07 fps" and convert's "fits at 25% speed (6.07 fps)" for
+    the same slow-down: one rounding (down, to 0.01 fps), not 6.07 in one and 6.0 in the other."""
+    rep: dict[str, Any] = json.loads(cli.procs["check_whip_json"].stdout)
+    fps = 24.0 / rep["scale_factor"]  # scale's slow-down: the whip's peak use, ends included
+    shown = f"{math.floor(fps * 100) / 100:.2f}"
+    assert shown == f"{math.floor(rep['feasible_fps'] * 100) / 100:.2f}" == "6.07"
+    assert f"could be shot at {shown} fps" in cli.procs["check_whip"].stdout
+    convert = cli.procs["convert_whip"]
+    assert convert.returncode == 3
+    assert f"the move fits at {math.floor(100 / rep['scale_factor'])}% speed ({shown} fps)" \
+        in convert.stderr, convert.stderr
 
 
 def test_check_unreachable_names_frames_and_misses_and_exits_3(

@@ -229,7 +229,7 @@ def test_shot_velocity_violation_names_axis_frames_and_speed(limits: Limits) -> 
 
     msg = str(err)
     assert msg.startswith(f"rotate velocity 144 deg/s exceeds 90.0 deg/s on frames {first}-{last}")
-    assert "62% speed (15.0 fps)" in msg  # 1/1.6 = 62.5 %, 24 fps * 0.625 = 15.0 fps
+    assert "62% speed (15.00 fps)" in msg  # 1/1.6 = 62.5 %, 24 fps * 0.625 = 15.0 fps
     assert "--timing scale" in msg
     assert err.max_speed == pytest.approx(1 / k, rel=1e-5)
     assert err.feasible_fps == pytest.approx(FPS / k, rel=1e-5)

@@ -15,7 +15,15 @@ from camtraj.errors import frame_ranges
 from camtraj.report.data import ReportData
 from camtraj.report.plots import COLORS, figures, limit_text
 from camtraj.report.samples import QUANTITIES
-from camtraj.shown import EDGE_QUANTITIES, edge_use, percent, seconds, servo, speed_percent
+from camtraj.shown import (
+    EDGE_QUANTITIES,
+    edge_use,
+    frame_rate,
+    percent,
+    seconds,
+    servo,
+    speed_percent,
+)
 
 # ---------------------------------------------------------------------------------------------
 # The page
@@ -78,7 +86,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
     if math.isfinite(data.max_speed):
         rows.append(("maximum feasible speed",
                      f"{speed_percent(data.max_speed)} of real time (could be shot at "
-                     f"{math.floor(100 * data.fps * data.max_speed) / 100:.2f} fps)"))
+                     f"{frame_rate(data.fps * data.max_speed)} fps)"))
     elif data.status != "unreachable":
         rows.append(("maximum feasible speed", "not recorded in this file"))
     if data.status == "ok" and s is not None:

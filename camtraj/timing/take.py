@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from camtraj.shown import frame_rate, speed_percent
 from camtraj.timing.clock import on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
@@ -702,9 +703,8 @@ def _shot_mode_error(
     except TimingLimitError as exc:
         advice, factor = f"--timing scale does not fit it either: {exc}", math.inf
     else:
-        pct = math.floor(100.0 / factor)
-        fit_fps = math.floor(fps / factor * 10.0) / 10.0
-        advice = f"the move fits at {pct}% speed ({fit_fps:.1f} fps) - try --timing scale"
+        advice = (f"the move fits at {speed_percent(1.0 / factor)} speed "
+                  f"({frame_rate(fps / factor)} fps) - try --timing scale")
     parts = [v.describe() for v in limiting[:4]]
     if len(limiting) > 4:
         parts.append(f"and {len(limiting) - 4} more")
