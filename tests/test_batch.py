@@ -255,8 +255,12 @@ def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) ->
                           cwd=tmp_path, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "out" / "blender_crane_up.mcap").stat().st_size > 0
+    # a floor strip round one placement that does the move, yaw fixed: few to solve
+    (tmp_path / "strip.toml").write_text(
+        "[floor]\nregion = [[-4.1, 0.4, 0], [20.6, 0.4, 0], [20.6, 1.6, 0], [-4.1, 1.6, 0]]\n"
+        "[search]\nyaw_deg = 0.0\n")
     proc = subprocess.run([str(command), "place", str(shot), "-o", "placed.toml", "--jobs", "2",
-                           "--frames", "1:6"],
+                           "--frames", "1:6", "--set-file", "strip.toml"],
                           cwd=tmp_path, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "placed.toml").is_file()
