@@ -482,6 +482,8 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
         "feasible_fps": exc.feasible_fps,
         # The slow-down --timing scale takes (it was run); null when it fails too.
         "scale_factor": (exc.scale_factor if math.isfinite(exc.scale_factor) else None),
+        # why the run-up or run-out does not fit, apart from the shot's own violations
+        "room": getattr(exc, "room", "") or None,
         "violations": [
             {"axis": v.axis, "quantity": v.quantity, "peak": v.peak, "limit": v.limit,
              "ratio": v.ratio, "frames": v.frame_text, "text": v.describe()}
@@ -537,6 +539,8 @@ def _report(r: dict[str, Any]) -> str:
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {v['text']}" for v in r["violations"]]
+        if r["violations"] and r.get("room"):  # without violations the message says it
+            lines.append(f"  {r['room']}")
         lines += [f"  note: {note}" for note in r.get("notes", [])]
         message, either = r["message"], "--timing scale does not fit it either: "
         if not r["violations"]:

@@ -355,6 +355,31 @@ def test_check_advises_scale_only_when_scale_fits(limits: Limits) -> None:
     assert "try --timing scale" not in text
 
 
+def test_check_says_why_the_run_up_does_not_fit_beside_the_shots_own_excess(
+        limits: Limits) -> None:
+    """A push starting 1 cm from the track's end at 1.5 m/s, the elbow 8% over its
+    acceleration limit: check lists the elbow and says the run-up needs more room (what
+    makes the take 7% of real time, not the elbow's 96%), as convert's error does."""
+    from camtraj.cli import _limit_report, _report
+    from camtraj.options import ConvertOptions
+
+    n = 10
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = limits.lower[TRACK] + 0.01 + 1.5 * t
+    q[:, ELBOW] -= 0.5 * 1.08 * limits.acceleration[ELBOW] * t**2
+    with pytest.raises(TimingLimitError) as info:
+        time_shot(q, t, limits)
+    room = "the run-up into frame 0"
+    assert room in str(info.value)  # convert's error line
+    result = _limit_report("push.usda", info.value, ConvertOptions())
+    assert [v["axis"] for v in result["violations"]] == ["elbow"]
+    assert result["room"].startswith(room) and "track goes" in result["room"]
+    lines = _report(result).splitlines()
+    assert lines[1].strip().startswith("elbow acceleration")
+    assert lines[2].strip() == result["room"], lines
+
+
 def test_camera_holds_are_equal_consecutive_poses() -> None:
     from camtraj.ik import camera_holds
 

@@ -176,6 +176,8 @@ class TimingLimitError(LimitError):
         scale_factor: The slow-down ``--timing scale`` takes for this shot (it was run and
             succeeded); inf when it fails too (or cannot help, as for a position limit);
             nan when not known.
+        room: Why the run-up or the run-out does not fit (one line; empty when they do or
+            were not planned), said apart from the violations of the shot itself.
     """
 
     def __init__(
@@ -186,12 +188,14 @@ class TimingLimitError(LimitError):
         max_speed: float = math.nan,
         feasible_fps: float = math.nan,
         scale_factor: float = math.nan,
+        room: str = "",
     ) -> None:
         super().__init__(message)
         self.violations = violations or []
         self.max_speed = max_speed
         self.feasible_fps = feasible_fps
         self.scale_factor = scale_factor
+        self.room = room
 
 
 @dataclass(frozen=True, eq=False)

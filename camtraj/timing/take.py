@@ -714,7 +714,7 @@ def _shot_mode_error(
         parts.append(text)
     return TimingLimitError("; ".join([*parts, advice]), violations=limiting,
                             max_speed=max_speed, feasible_fps=fps * max_speed,
-                            scale_factor=factor)
+                            scale_factor=factor, room=problem.text if problem else "")
 
 
 def _scale(
