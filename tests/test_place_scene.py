@@ -139,8 +139,10 @@ def test_one_layout_serves_every_shot_near_the_best_of_a_brute_force_grid(
     grid = [world(s, t) for s in (-HALF, HALF) for t in (-HALF, 0.0, HALF)]
     best = max(worst_speed(scene["three"], x, y) for x, y in grid)
     assert best >= 1.0  # one layout can serve every shot at its own timing
-    found = min(speed(shot, p["x"], p["y"]) for shot in scene["three"])
-    assert found == pytest.approx(min(speeds.values()), rel=1e-6)
+    # what place's worker processes found for each shot is what this process finds there
+    here = {shot.name: speed(shot, p["x"], p["y"]) for shot in scene["three"]}
+    assert here == pytest.approx(speeds, rel=1e-6)
+    found = min(here.values())
     assert found >= 0.95 * best, (found, best)
 
 
@@ -281,20 +283,6 @@ def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"shot 3 .* repeats shot 1"):
         _no_repeats([SceneShot(str(shot)), SceneShot(str(shot), "/cam"),
                      SceneShot(str(tmp_path / "b.usda"))])
-
-
-def test_the_layout_does_not_depend_on_the_number_of_jobs(scene: dict[str, Any]) -> None:
-    """One worker or two: the same placement and the same per-shot speeds (the race that
-    drops placements early keeps the exact best ones whatever order the solves finish in)."""
-    d = scene["dir"]
-    proc = run("place", *scene["three"], "--set-file", d / "set.toml", "--json", "-j", "1")
-    assert proc.returncode == 0, proc.stderr
-    one, two = json.loads(proc.stdout)["placement"], scene["report"]["placement"]
-    assert (one["x"], one["y"], one["yaw_deg"]) == pytest.approx(
-        (two["x"], two["y"], two["yaw_deg"]), abs=1e-9)
-    assert [s["max_speed"] for s in one["shots"]] == pytest.approx(
-        [s["max_speed"] for s in two["shots"]], rel=1e-9)
-    assert one["limiting_shot"] == two["limiting_shot"]
 
 
 def test_the_race_keeps_the_best_layouts_of_a_brute_force_whatever_the_jobs() -> None:
