@@ -68,7 +68,7 @@ typecheck: $(STAMP)
 # idle (two cores: 733 s of pytest with two workers, 619 s with three).
 WORKERS ?= $(shell echo $$(( $$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1) + 1 )))
 unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
-	$(BIN)/pytest -n $(WORKERS) --dist loadfile --no-loadscope-reorder $(ARGS)
+	$(BIN)/pytest -n $(WORKERS) --dist loadfile $(ARGS)
 
 # Headless Chromium renders the HTML report in the tests (they skip, saying so, without it).
 # Idempotent: installs the Debian package only when no chromium is on the PATH. `make test`

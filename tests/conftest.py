@@ -30,20 +30,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
 
-#: The test files that take longest (seconds of test time each, two workers on two cores:
-#: 238, 172, 156, 94, 73, 52, 48), in that order. ``make unit`` runs the suite a file per
-#: worker in the order collected (``--dist loadfile --no-loadscope-reorder``): these start
-#: first, so that none is left running alone on one core at the end while the other idles.
-LONGEST_FIRST = ("test_shot_set.py", "test_place.py", "test_place_scene.py",
-                 "test_report_memory.py", "test_batch.py", "test_hardening_commands.py",
-                 "test_hardening.py")
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: else as collected
-
-
 @pytest.fixture(scope="session")
 def robot() -> Robot:
     return Robot.default()
