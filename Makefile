@@ -64,8 +64,8 @@ typecheck: $(STAMP)
 
 # The suite on every core (pytest-xdist), a test file per worker: module fixtures such as
 # the shot set's solves run once. One worker more than the cores: many tests wait on the
-# camtraj processes they start, and with a worker per core a fifth of the cores' time went
-# idle (two cores: 733 s of pytest with two workers, 608-619 s with three).
+# camtraj processes they start, and with a worker per core a quarter of the cores' time
+# went idle (two cores: 733 s of pytest with two workers, 608-619 s with three).
 WORKERS ?= $(shell echo $$(( $$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1) + 1 )))
 unit: $(STAMP) $(if $(filter true,$(CI)),chromium)
 	$(BIN)/pytest -n $(WORKERS) --dist loadfile $(ARGS)

@@ -190,10 +190,7 @@ def _file_failed(exc: OSError) -> NoReturn:
     own installation gone, say): the file and the reason, not a traceback."""
     reason, name = exc.strerror or str(exc), exc.filename
     name = os.fsdecode(name) if isinstance(name, (str, bytes, os.PathLike)) else str(name)
-    with contextlib.suppress(OSError, ValueError):
-        click.echo(f"ERROR: cannot use {one_line(name)}: "
-                   f"{reason[:1].lower()}{reason[1:]}", err=True)
-    sys.exit(1)
+    _fail(CamtrajError(f"cannot use {name}: {reason[:1].lower()}{reason[1:]}"))  # exit 1
 
 
 def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
@@ -483,7 +480,7 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
         # The slow-down --timing scale takes (it was run); null when it fails too.
         "scale_factor": (exc.scale_factor if math.isfinite(exc.scale_factor) else None),
         # why the run-up or run-out does not fit, apart from the shot's own violations
-        "room": getattr(exc, "room", "") or None,
+        "room": exc.room or None,
         "violations": [
             {"axis": v.axis, "quantity": v.quantity, "peak": v.peak, "limit": v.limit,
              "ratio": v.ratio, "frames": v.frame_text, "text": v.describe()}
