@@ -520,6 +520,21 @@ def _pct(x: float) -> str:
     return percent(x).rjust(5)
 
 
+def _by_axis(violations: list[dict[str, Any]]) -> list[str]:
+    """One line per axis: its worst excess (the violations come worst first, by the slow-down
+    each needs), then the axis's other exceeded quantities by name ("--json" has them all)."""
+    axes: dict[str, list[dict[str, Any]]] = {}
+    for v in violations:
+        axes.setdefault(v["axis"], []).append(v)
+    lines = []
+    for worst, *others in axes.values():
+        names = [v["quantity"] for v in others]
+        also = (f" (also {', '.join(names[:-1])} and {names[-1]})" if len(names) > 1
+                else f" (also {names[0]})" if names else "")
+        lines.append(worst["text"] + also)
+    return lines
+
+
 def _report(r: dict[str, Any]) -> str:
     """The human-readable report of a convert / check run."""
     if r["status"] == "unreachable":
@@ -535,7 +550,7 @@ def _report(r: dict[str, Any]) -> str:
         return f"{r['shot']}: COLLISION\n  {r['message']}"
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
-        lines += [f"  {v['text']}" for v in r["violations"]]
+        lines += [f"  {line}" for line in _by_axis(r["violations"])]
         if r["violations"] and r.get("room"):  # without violations the message says it
             lines.append(f"  {r['room']}")
         lines += [f"  note: {note}" for note in r.get("notes", [])]

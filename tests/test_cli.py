@@ -277,6 +277,19 @@ def test_check_whip_pan_reports_limits_and_exits_3(cli: CliRuns) -> None:
         assert v["ratio"] > 1.0 and v["limit"] > 0.0 and abs(v["peak"]) > v["limit"]
     _assert_wrote_nothing(cli, "check_whip_json")
 
+    # the text gives each axis one line, its worst excess (JSON's first of that axis) and
+    # the names of its others; JSON keeps every violation
+    lines = [ln.strip() for ln in out.splitlines() if " exceeds " in ln]
+    by_axis: dict[str, list[dict[str, Any]]] = {}
+    for v in rep["violations"]:
+        by_axis.setdefault(v["axis"], []).append(v)
+    assert len(rep["violations"]) > len(by_axis) == len(lines), out
+    for line, (axis, vs) in zip(lines, by_axis.items(), strict=True):
+        assert line.startswith(vs[0]["text"]), (line, vs[0]["text"])
+        assert line.startswith(f"{axis} "), line
+        for other in vs[1:]:
+            assert other["quantity"] in line.removeprefix(vs[0]["text"]), line
+
 
 def test_check_and_convert_give_the_speed_that_fits_alike(cli: CliRuns) -> None:
     """check's "could be shot at 6.07 fps" and convert's "fits at 25% speed (6.07 fps)" for
