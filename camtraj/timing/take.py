@@ -271,23 +271,30 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
     else:
-        # The scale take, or the whole shot played at its maximum feasible speed where that
-        # is faster and the shot has no hold to keep (a uniform law shortens holds too),
-        # unless the jerk-limited time-optimal retime is shorter still. Its ends are no faster
-        # than the uniform take at the maximum feasible speed, so its run-up and run-out
-        # have room too.
-        speed_factor, ticks, shot, shot_x, up, out = scaled()
-        fastest_factor = speed_factor  # a shot that must slow down: the scale take itself
+        # The shortest take of three: the scale take; the whole shot played uniformly at its
+        # maximum feasible speed, where that is faster and the shot has no hold to keep (a
+        # uniform law shortens holds too); the jerk-limited time-optimal retime. Each is
+        # measured whole, run-up and run-out included: a faster shot part can need longer
+        # ends. The retime's ends are no faster than the uniform take at the maximum
+        # feasible speed, so its run-up and run-out have room too.
+        uniform_takes = [scaled()]
         if need < 1.0:
-            fastest = scaled(floor=1.0 / MAX_SCALE)
-            fastest_factor = fastest[0]
-            if fastest_factor < speed_factor and not path.still.all(axis=1).any():
-                speed_factor, ticks, shot, shot_x, up, out = fastest
-            del fastest  # its samples, unless they are the take's
+            uniform_takes.append(scaled(floor=1.0 / MAX_SCALE))
+        fastest_factor = uniform_takes[-1][0]  # a shot that must slow down: scale's own
+        if path.still.all(axis=1).any():
+            del uniform_takes[1:]
+        speed_factor, ticks, shot, shot_x, up, out = min(
+            uniform_takes, key=lambda take: _uniform_length(take, n, dt))
+        del uniform_takes  # their samples, but the take's
         shot_rate = ticks / (speed_factor * dt)
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
+        length = _uniform_length((speed_factor, ticks, shot, shot_x, up, out), n, dt)
         retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
+        if retimed is not None:
+            r_up, r_out = _build_edges(retimed[2], limits, ends, start_q, 1.0 / rate, frames)
+            if (r_up.q.shape[0] + r_out.q.shape[0]) / rate + retimed[0][-1] >= length:
+                retimed = None  # its ends cost more than its shot part saves
         if retimed is None:
             warnings.append(
                 "--timing optimal found no jerk-limited timing shorter than a uniform one: "
@@ -295,11 +302,11 @@ def time_shot(
                 "time")
         else:
             shot_t, shot_x, shot, frame_idx = retimed
+            up, out = r_up, r_out
             del retimed
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
             ticks = 0  # samples per frame vary
             shot_rate = 0.0
-            up, out = _build_edges(shot, limits, ends, start_q, 1.0 / rate, frames)
 
     # Position limits of the shot part as sampled in the take.
     pos_bad = [v for v in violations(shot, limits, FrameMap.of(shot_x, frames), LIMIT_RTOL)
@@ -715,6 +722,14 @@ def _shot_mode_error(
     return TimingLimitError("; ".join([*parts, advice]), violations=limiting,
                             max_speed=max_speed, feasible_fps=fps * max_speed,
                             scale_factor=factor, room=problem.text if problem else "")
+
+
+def _uniform_length(take: tuple[float, int, Samples, Array, Edge, Edge], n: int,
+                    dt: float) -> float:
+    """The whole length [s] of a uniform take (:func:`_scale`'s answer) of n frames, run-up
+    and run-out included: every sample a step of ``factor dt / ticks`` apart."""
+    factor, ticks, _shot, _x, up, out = take
+    return (up.q.shape[0] + out.q.shape[0]) * factor * dt / ticks + (n - 1) * factor * dt
 
 
 def _scale(
