@@ -375,6 +375,7 @@ def _read(
     cam2world, shear_deg = _world_poses(
         prim, path, time_codes, frame_numbers, meters_per_unit, up_axis
     )
+    cam2world = _keep_holds(cam2world, _keyed_holds(prim, time_codes))
 
     cam = UsdGeom.Camera(prim)
     lens = {}
@@ -729,6 +730,64 @@ def _world_poses(
     cam2world[:, :3, 3] = translation
     cam2world[:, 3, 3] = 1.0
     return cam2world, shear_deg
+
+
+HOLD_NOISE = 1e-6
+"""The most (metres, or unitless for the rotation) USD's interpolation between two equal keys
+moves the pose: float attributes interpolated between equal values come back up to a few
+float rounding steps off (1.3e-7 rad for a ``float3`` rotation)."""
+
+
+def _keyed_holds(prim: Any, time_codes: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per frame pair (n - 1,), whether the camera holds still as authored: every transform
+    op of the camera and its ancestors keeps its value over the pair's interval (its time
+    samples from the last one at or before the first frame to the first one at or after the
+    second are all equal). A spline-valued op is never taken as holding."""
+    held = np.ones(max(len(time_codes) - 1, 0), dtype=bool)
+    a, b = time_codes[:-1], time_codes[1:]
+    p = prim
+    while p and not p.IsPseudoRoot() and held.any():
+        xformable = UsdGeom.Xformable(p)
+        for op in xformable.GetOrderedXformOps() if xformable else ():
+            attr = op.GetAttr()
+            if attr.HasSpline():
+                return np.zeros_like(held)
+            times = np.asarray(attr.GetTimeSamples(), dtype=float)
+            if times.size < 2:
+                continue  # a constant
+            values = [_key_value(attr.Get(Usd.TimeCode(float(t)))) for t in times]
+            changed = [not np.array_equal(v, w) for v, w in zip(values[:-1], values[1:],
+                                                                   strict=True)]
+            run = np.concatenate([[0], np.cumsum(changed)])  # equal keys in a row: one run
+            lo = np.clip(np.searchsorted(times, a, side="right") - 1, 0, times.size - 1)
+            hi = np.clip(np.searchsorted(times, b, side="left"), 0, times.size - 1)
+            held &= run[lo] == run[hi]
+            if not held.any():
+                break
+        p = p.GetParent()
+    return held
+
+
+def _key_value(value: Any) -> NDArray[np.float64]:
+    """An xform op's authored value as numbers (quaternions: real part, then imaginary)."""
+    if hasattr(value, "GetImaginary"):
+        return np.array([value.GetReal(), *value.GetImaginary()], dtype=float)
+    return np.asarray(value, dtype=float).ravel()
+
+
+def _keep_holds(cam2world: NDArray[np.float64],
+                held: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The poses with every authored hold exact: each frame of a run of held pairs takes the
+    run's first pose, where USD's interpolation moved it by no more than :data:`HOLD_NOISE`
+    (a larger change is motion, whatever the keys say)."""
+    n = cam2world.shape[0]
+    starts = np.concatenate([[True], ~held]) if n else np.zeros(0, dtype=bool)
+    first = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
+    noise = np.abs(cam2world - cam2world[first]).max(axis=(1, 2)) if n else np.zeros(0)
+    keep = noise <= HOLD_NOISE
+    out = cam2world.copy()
+    out[keep] = cam2world[first[keep]]
+    return out
 
 
 def _sample_attribute(
