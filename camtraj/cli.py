@@ -28,6 +28,7 @@ from camtraj.errors import (
     CamtrajError,
     CollisionError,
     InputError,
+    LensRangeError,
     UnreachableFramesError,
     one_line,
 )
@@ -316,6 +317,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
         result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
                   "link": exc.link, "prim": exc.prim, "distance_m": exc.distance,
                   "clearance_m": exc.clearance}
+    except LensRangeError as exc:
+        result = {"status": "lens_range", "shot": shot, "message": str(exc)}
     except CamtrajError as exc:
         progress.close()
         _fail(exc)
@@ -548,6 +551,8 @@ def _report(r: dict[str, Any]) -> str:
         return "\n".join(lines)
     if r["status"] == "collision":
         return f"{r['shot']}: COLLISION\n  {r['message']}"
+    if r["status"] == "lens_range":
+        return f"{r['shot']}: OUTSIDE THE LENS'S RANGE\n  {r['message']}"
     if r["status"] == "limits":
         lines = [f"{r['shot']}: NOT POSSIBLE with --timing {r['timing']}"]
         lines += [f"  {line}" for line in _by_axis(r["violations"])]

@@ -298,7 +298,10 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
             side, end = ("below", cal.low) if low[k] else ("beyond", cal.high)
             if axis.name == "focus":
                 side = "nearer than" if low[k] else "farther than"
-            msg = (f"{QUANTITY[axis.name]} {_show(axis.name, float(x[k]), axis.unit)} at frame "
+            read = (f" (the shot's fStop {float(x[k]):.3g})"
+                    if axis.name == "iris" and axis.unit == "T-stop" else "")
+            shown = _show(axis.name, float(x[k]), axis.unit)
+            msg = (f"{QUANTITY[axis.name]} {shown}{read} at frame "
                    f"{int(shot.frames[k])} is {side} the lens's "
                    f"{_show(axis.name, end, axis.unit)} ({lens.name} covers "
                    f"{_show(axis.name, cal.low, axis.unit)} to "

@@ -39,6 +39,7 @@ referenced set file) are trapped and passed to this module's logger instead of s
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import math
 import numbers
@@ -756,8 +757,7 @@ def _keyed_holds(prim: Any, time_codes: NDArray[np.float64]) -> NDArray[np.bool_
             if times.size < 2:
                 continue  # a constant
             values = [_key_value(attr.Get(Usd.TimeCode(float(t)))) for t in times]
-            changed = [not np.array_equal(v, w) for v, w in zip(values[:-1], values[1:],
-                                                                   strict=True)]
+            changed = [not np.array_equal(v, w) for v, w in itertools.pairwise(values)]
             run = np.concatenate([[0], np.cumsum(changed)])  # equal keys in a row: one run
             lo = np.clip(np.searchsorted(times, a, side="right") - 1, 0, times.size - 1)
             hi = np.clip(np.searchsorted(times, b, side="left"), 0, times.size - 1)

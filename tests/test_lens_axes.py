@@ -265,13 +265,23 @@ def test_a_focal_length_beyond_the_lens_is_an_error_at_that_frame(
                        "[70.0, 52.0],\n    [100.0, 68.5], [135.0, 82.0], [180.0, 95.5], "
                        "[240.0, 109.0], [290.0, 120.0],", "")
     assert Lens.from_toml(short).axis("zoom").calibration.high == 50.0  # type: ignore[union-attr]
-    proc = run_cli("check", dolly["shot"], "--lens", short)
-    assert proc.returncode == 3, proc.stderr
     usd = dolly["usd"]
     first = int(usd["frames"][np.flatnonzero(usd["focal_mm"] > 50.0 * (1 + 1e-6))[0]])
-    line = error_line(proc)
+    # check reports it as it reports any shot it cannot do: on stdout, and as JSON
+    proc = run_cli("check", dolly["shot"], "--lens", short)
+    assert proc.returncode == 3, proc.stderr
+    head, line = proc.stdout.splitlines()
+    assert head == f"{dolly['shot']}: OUTSIDE THE LENS'S RANGE", proc.stdout
     assert f"at frame {first} is beyond the lens's 50 mm" in line, line
     assert re.search(r"focal length 5\d\.\d+ mm at frame", line), line
+    proc = run_cli("check", dolly["shot"], "--lens", short, "--json")
+    assert proc.returncode == 3, proc.stderr
+    assert json.loads(proc.stdout) == {"status": "lens_range", "shot": str(dolly["shot"]),
+                                       "message": line.strip()}
+    proc = run_cli("convert", dolly["shot"], "-o", dolly["folder"] / "short.mcap", "--lens",
+                   short)
+    assert proc.returncode == 3 and line.strip() in error_line(proc), proc.stderr
+    assert not (dolly["folder"] / "short.mcap").exists()
 
 
 def test_a_prime_warns_and_the_camera_shows_its_focal_length(dolly: dict[str, Any]) -> None:

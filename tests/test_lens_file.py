@@ -223,7 +223,7 @@ def test_unset_focus_and_stop_hold_at_home(tmp_path: Path) -> None:
         ([30.0, 30.0, 30.0], [2.0, 1.0, 0.4], [4.0, 4.0, 4.0],
          "focus distance 0.4 m at frame 103 is nearer than the lens's 0.6 m"),
         ([30.0, 30.0], [2.0, 2.0], [2.0, 4.0],
-         "stop T2 at frame 101 is below the lens's T2.8"),
+         "stop T2 (the shot's fStop 2) at frame 101 is below the lens's T2.8"),
     ],
 )
 def test_a_lens_quantity_beyond_the_table_names_the_frame(

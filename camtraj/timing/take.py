@@ -729,7 +729,7 @@ def _uniform_length(take: tuple[float, int, Samples, Array, Edge, Edge], n: int,
     """The whole length [s] of a uniform take (:func:`_scale`'s answer) of n frames, run-up
     and run-out included: every sample a step of ``factor dt / ticks`` apart."""
     factor, ticks, _shot, _x, up, out = take
-    return (up.q.shape[0] + out.q.shape[0]) * factor * dt / ticks + (n - 1) * factor * dt
+    return float((up.q.shape[0] + out.q.shape[0]) * factor * dt / ticks + (n - 1) * factor * dt)
 
 
 def _scale(
