@@ -704,14 +704,17 @@ def _shot_mode_error(
     scaled: Callable[[], tuple[float, int, Samples, Array, Edge, Edge]], text: str = "",
 ) -> TimingLimitError:
     """Why the shot's own timing does not fit, and what ``--timing scale`` does about it
-    (it is run to find out: the advice is only given when scale succeeds)."""
+    (it is run to find out: the advice is only given when scale succeeds). Where it does, the
+    maximum feasible speed reported is the scale take's (the real-time measure's, rounded to
+    the servo grid that take runs on), so every message gives the one speed."""
     try:
         factor = scaled()[0]
     except TimingLimitError as exc:
         advice, factor = f"--timing scale does not fit it either: {exc}", math.inf
     else:
-        advice = (f"the move fits at {speed_percent(1.0 / factor)} speed "
-                  f"({frame_rate(fps / factor)} fps) - try --timing scale")
+        max_speed = 1.0 / factor
+        advice = (f"the move fits at {speed_percent(max_speed)} speed "
+                  f"({frame_rate(fps * max_speed)} fps) - try --timing scale")
     parts = [v.describe() for v in limiting[:4]]
     if len(limiting) > 4:
         parts.append(f"and {len(limiting) - 4} more")
