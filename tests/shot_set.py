@@ -531,18 +531,33 @@ def _designs() -> list[Design]:
     d.append(Design("handheld push to a table 5 s (Z-up cm, 24 fps, matrix)", handheld_push,
                     5.0, 24.0, "Z", 0.01, matrix=True))
 
-    def reach_truck(t: Array, u: Array) -> Cam:
-        # away from rest to 1.5 m/s in a second, then on at that speed to the last frame at
-        # camera x = 19.7 m, 5.7 m past the track's end (the arm reaches on): the track and
-        # the extend both end near their limits, still moving, and only the run-out's room
-        # decides the speed
-        v = 1.5 * np.clip(t, 0.0, 1.0)
-        x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-        pos = np.stack([19.7 - x[-1] + x, np.full_like(t, -1.0), np.full_like(t, 1.3)], axis=1)
-        return Cam(pos, np.full_like(t, 90.0), np.full_like(t, -3.0))
+    def reach_truck(end_x: float) -> Callable[[Array, Array], Cam]:
+        def build(t: Array, u: Array) -> Cam:
+            # away from rest to 1.5 m/s in a second, then on at that speed to the last frame
+            # at camera x = end_x, past the track's end (the arm reaches on): the track and
+            # the extend both end near their limits, still moving, and the run-out's room
+            # decides the speed
+            v = 1.5 * np.clip(t, 0.0, 1.0)
+            x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+            pos = np.stack([end_x - x[-1] + x, np.full_like(t, -1.0), np.full_like(t, 1.3)],
+                           axis=1)
+            return Cam(pos, np.full_like(t, 90.0), np.full_like(t, -3.0))
+        return build
 
-    d.append(Design("truck ends moving at the arm's full reach 8 s (Z-up m)", reach_truck,
+    # 5.7 m past the track's end: both prismatic axes end on their limits
+    d.append(Design("truck ends moving at the arm's full reach 8 s (Z-up m)", reach_truck(19.7),
                     8.0, 24.0))
+    # 5.5 m past it: the arm takes over from the track before the end (a new user's move the
+    # programme ranked into a slow basin, 0.90 of 10x the effort)
+    d.append(Design("truck ends moving past the track's end 8 s (Z-up m)", reach_truck(19.5),
+                    8.0, 24.0))
+
+    def crane_down_end(t: Array, u: Array) -> Cam:  # ends moving with the elbow near its limit
+        pos = _line(u, (16.8, -0.4, 1.9), (17.6, -0.4, 0.9))
+        return Cam(pos, -20.0 + 50.0 * u, -25.0 + 20.0 * u)
+
+    d.append(Design("crane down with pan ends moving at the track's end 0.8 s (Y-up cm, 25 fps)",
+                    crane_down_end, 0.8, 25.0, "Y", 0.01))
     return d
 
 

@@ -227,6 +227,9 @@ class ShotCost:
         power, scale: The refinement's power mean of the take's uses.
         room: Whether the ends' room to their position limits is among the take's uses
             (:meth:`room_needs`; the refinement adds it from its second stage on).
+        edge_room: Whether the programme's run-up and run-out cost (:meth:`edge_cost`)
+            also weighs that room as a use: a stop that needs a take slower than real time
+            to fit before its limit costs as a step beyond the velocity limit does.
         holds: The frames (first, last) where the camera, and so the robot, holds still
             (:func:`~camtraj.ik.spline_ops.hold_runs`): the take's spline is clamped to rest
             next to them, as the timing stage fits it.
@@ -252,6 +255,7 @@ class ShotCost:
     scale: float = 1.0
     holds: tuple[tuple[int, int], ...] = ()
     room: bool = True
+    edge_room: bool = False
 
     @classmethod
     def for_robot(cls, robot: Robot, dt: float) -> ShotCost:
@@ -479,6 +483,18 @@ class ShotCost:
         return np.asarray(np.maximum(1.0 - d / self.zone[:8], 0.0))
 
     def edge_cost(self, q_edge: Array, q_inner: Array) -> Array:
-        """Margin cost (...) of the run-up or run-out room at a shot's end frame."""
+        """Cost (...) of the run-up or run-out room at a shot's end frame: the margin cost of
+        its stopping excursion at real time; with :attr:`edge_room`, also the overspeed cost
+        of its room need beyond real time (the slow-down its stop needs to fit before the
+        limit ahead, as :meth:`room_needs` has it, penalised past 1 as a step's velocity
+        usage is)."""
         e = self.edge_intrusion(self.edge_excursion(q_edge, q_inner)[0])
-        return np.asarray(self.margin * (e * e).sum(axis=-1))
+        if not self.edge_room:
+            return np.asarray(self.margin * (e * e).sum(axis=-1))
+        d = q_edge - q_inner
+        d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
+        room = np.where(d > 0, self.upper - q_edge, q_edge - self.lower)
+        need = np.abs(d) / self.dt / self.stop_speed(np.maximum(room, 1e-12))
+        over = np.maximum(need - 1.0, 0.0)
+        return np.asarray(self.margin * (e * e).sum(axis=-1)
+                          + self.overspeed * (over * over).sum(axis=-1))
