@@ -197,7 +197,6 @@ def _basis(x: Array, a: int, b: int) -> tuple[IntArray, Array]:
 
 def optimal(
     path: FramePath, limits: Limits, rate: float, scale_factor: float,
-    ends: float | None = None,
 ) -> tuple[Array, Array, Samples, IntArray] | None:
     """Fastest traversal of the path under velocity, acceleration and jerk limits.
 
@@ -206,9 +205,8 @@ def optimal(
         limits: The robot's limits.
         rate: Requested servo rate [Hz]: every frame interval is cut into the fewest equal
             steps no longer than ``1 / rate``, so every frame is a sample.
-        scale_factor: The slow-down of the uniform take the answer must beat.
-        ends: The slow-down of a uniform take whose run-up and run-out fit (default
-            ``scale_factor``): the shot starts and ends no faster than it.
+        scale_factor: The slow-down of the uniform take the answer must beat (its run-up
+            and run-out fit): the shot starts and ends no faster than it.
 
     Returns:
         Sample times of the shot part from the first frame [s], the frame coordinate of each
@@ -218,7 +216,7 @@ def optimal(
     n = path.n
     dt = path.dt
     limits = replace(limits, jerk=limits.jerk * (1.0 - CLOCK_HEADROOM))
-    u_scale = 0.5 / ((scale_factor if ends is None else ends) * dt) ** 2
+    u_scale = 0.5 / (scale_factor * dt) ** 2
     still_all = np.all(path.still, axis=1)
     laws = []
     for a, b in runs(~still_all):

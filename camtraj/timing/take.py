@@ -275,14 +275,11 @@ def time_shot(
         # maximum feasible speed, where that is faster and the shot has no hold to keep (a
         # uniform law shortens holds too); the jerk-limited time-optimal retime. Each is
         # measured whole, run-up and run-out included: a faster shot part can need longer
-        # ends. The retime's ends are no faster than the uniform take at the maximum
-        # feasible speed, so its run-up and run-out have room too.
+        # ends. The retime starts and ends no faster than the shorter uniform take, so its
+        # run-up and run-out have room too, and are no longer than that take's.
         uniform_takes = [scaled()]
-        if need < 1.0:
+        if need < 1.0 and not path.still.all(axis=1).any():
             uniform_takes.append(scaled(floor=1.0 / MAX_SCALE))
-        fastest_factor = uniform_takes[-1][0]  # a shot that must slow down: scale's own
-        if path.still.all(axis=1).any():
-            del uniform_takes[1:]
         speed_factor, ticks, shot, shot_x, up, out = min(
             uniform_takes, key=lambda take: _uniform_length(take, n, dt))
         del uniform_takes  # their samples, but the take's
@@ -290,7 +287,7 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         length = _uniform_length((speed_factor, ticks, shot, shot_x, up, out), n, dt)
-        retimed = optimal(path, limits, rate, speed_factor, ends=fastest_factor)
+        retimed = optimal(path, limits, rate, speed_factor)
         if retimed is not None:
             r_up, r_out = _build_edges(retimed[2], limits, ends, start_q, 1.0 / rate, frames)
             if (r_up.q.shape[0] + r_out.q.shape[0]) / rate + retimed[0][-1] >= length:
