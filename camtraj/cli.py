@@ -35,7 +35,15 @@ from camtraj.errors import (
 from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
-from camtraj.shown import edge_use, frame_rate, percent, seconds, servo, speed_percent
+from camtraj.shown import (
+    edge_use,
+    frame_rate,
+    percent,
+    scale_fit,
+    seconds,
+    servo,
+    speed_percent,
+)
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
@@ -567,8 +575,8 @@ def _report(r: dict[str, Any]) -> str:
         speed, factor = r["max_speed"], r.get("scale_factor")
         if speed is not None and math.isfinite(speed) and speed > 0:
             fps = r["feasible_fps"] / speed
-            advice = ("; try --timing scale" if factor is not None and r["timing"] != "scale"
-                      else "")
+            advice = (f"; try --timing scale: the move {scale_fit(factor, fps)}"
+                      if factor is not None and r["timing"] != "scale" else "")
             lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
                          + advice)
         return "\n".join(lines)

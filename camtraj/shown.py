@@ -12,8 +12,8 @@ import math
 from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "percent", "seconds",
-           "servo", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "percent",
+           "scale_fit", "seconds", "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -83,3 +83,9 @@ def edge_use(runup: Mapping[str, Mapping[str, float]], runout: Mapping[str, Mapp
         out[name] = {q: max((float(p.get(q, 0.0)) for p in parts), default=0.0)
                      for q in EDGE_QUANTITIES}
     return out
+
+
+def scale_fit(factor: float, fps: float) -> str:
+    """'fits at 58% speed (14.70 fps)': the speed of the scale take, the shot slowed by
+    ``factor`` (a hair slower than the maximum feasible speed where the servo grid rounds it)."""
+    return f"fits at {speed_percent(1.0 / factor)} speed ({frame_rate(fps / factor)} fps)"

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.shown import frame_rate, speed_percent
+from camtraj.shown import scale_fit
 from camtraj.timing.clock import on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
@@ -701,17 +701,14 @@ def _shot_mode_error(
     scaled: Callable[[], tuple[float, int, Samples, Array, Edge, Edge]], text: str = "",
 ) -> TimingLimitError:
     """Why the shot's own timing does not fit, and what ``--timing scale`` does about it
-    (it is run to find out: the advice is only given when scale succeeds). Where it does, the
-    maximum feasible speed reported is the scale take's (the real-time measure's, rounded to
-    the servo grid that take runs on), so every message gives the one speed."""
+    (it is run to find out: the advice is only given when scale succeeds, with the speed
+    the scale take runs at: :func:`scale_fit`)."""
     try:
         factor = scaled()[0]
     except TimingLimitError as exc:
         advice, factor = f"--timing scale does not fit it either: {exc}", math.inf
     else:
-        max_speed = 1.0 / factor
-        advice = (f"the move fits at {speed_percent(max_speed)} speed "
-                  f"({frame_rate(fps * max_speed)} fps) - try --timing scale")
+        advice = f"the move {scale_fit(factor, fps)} - try --timing scale"
     parts = [v.describe() for v in limiting[:4]]
     if len(limiting) > 4:
         parts.append(f"and {len(limiting) - 4} more")
