@@ -733,12 +733,6 @@ def _world_poses(
     return cam2world, shear_deg
 
 
-HOLD_NOISE = 1e-6
-"""The most (metres, or unitless for the rotation) USD's interpolation between two equal keys
-moves the pose: float attributes interpolated between equal values come back up to a few
-float rounding steps off (1.3e-7 rad for a ``float3`` rotation)."""
-
-
 def _keyed_holds(prim: Any, time_codes: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Per frame pair (n - 1,), whether the camera holds still as authored: every transform
     op of the camera and its ancestors keeps its value over the pair's interval (its time
@@ -778,16 +772,12 @@ def _key_value(value: Any) -> NDArray[np.float64]:
 def _keep_holds(cam2world: NDArray[np.float64],
                 held: NDArray[np.bool_]) -> NDArray[np.float64]:
     """The poses with every authored hold exact: each frame of a run of held pairs takes the
-    run's first pose, where USD's interpolation moved it by no more than :data:`HOLD_NOISE`
-    (a larger change is motion, whatever the keys say)."""
+    run's first pose (USD interpolates float values between two equal keys a few rounding
+    steps off: 1.3e-7 rad for a float3 rotation near 90 deg, 2e-6 rad four turns in)."""
     n = cam2world.shape[0]
     starts = np.concatenate([[True], ~held]) if n else np.zeros(0, dtype=bool)
     first = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
-    noise = np.abs(cam2world - cam2world[first]).max(axis=(1, 2)) if n else np.zeros(0)
-    keep = noise <= HOLD_NOISE
-    out = cam2world.copy()
-    out[keep] = cam2world[first[keep]]
-    return out
+    return np.asarray(cam2world[first])
 
 
 def _sample_attribute(
