@@ -11,6 +11,7 @@ limits (checked by divided differences of the stream, the mean value theorem's b
 
 from __future__ import annotations
 
+import html
 import json
 import math
 import re
@@ -267,13 +268,18 @@ def test_a_focal_length_beyond_the_lens_is_an_error_at_that_frame(
     assert Lens.from_toml(short).axis("zoom").calibration.high == 50.0  # type: ignore[union-attr]
     usd = dolly["usd"]
     first = int(usd["frames"][np.flatnonzero(usd["focal_mm"] > 50.0 * (1 + 1e-6))[0]])
-    # check reports it as it reports any shot it cannot do: on stdout, and as JSON
-    proc = run_cli("check", dolly["shot"], "--lens", short)
+    # check reports it as it reports any shot it cannot do: on stdout, in the HTML report,
+    # and as JSON
+    page = dolly["folder"] / "short.html"
+    proc = run_cli("check", dolly["shot"], "--lens", short, "--report", page)
     assert proc.returncode == 3, proc.stderr
     head, line = proc.stdout.splitlines()
     assert head == f"{dolly['shot']}: OUTSIDE THE LENS'S RANGE", proc.stdout
     assert f"at frame {first} is beyond the lens's 50 mm" in line, line
     assert re.search(r"focal length 5\d\.\d+ mm at frame", line), line
+    text = html.unescape(page.read_text(encoding="utf-8"))
+    assert f"OUTSIDE THE LENS'S RANGE: {line.strip()}" in text
+    assert "CANNOT BE REACHED" not in text
     proc = run_cli("check", dolly["shot"], "--lens", short, "--json")
     assert proc.returncode == 3, proc.stderr
     assert json.loads(proc.stdout) == {"status": "lens_range", "shot": str(dolly["shot"]),

@@ -26,7 +26,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.errors import InfeasibleError, InputError, UnreachableFramesError
+from camtraj.errors import (
+    InfeasibleError,
+    InputError,
+    LensRangeError,
+    UnreachableFramesError,
+)
 from camtraj.report.samples import QUANTITIES, Samples, in_blocks, reduce_samples
 
 if TYPE_CHECKING:
@@ -68,8 +73,10 @@ class ReportData:
 
     Attributes:
         shot: The shot file. camera: Its camera prim. robot: Robot name and source.
-        status: ``"ok"``, ``"limits"`` (the shot's timing exceeds a limit) or
-            ``"unreachable"`` (frames the robot cannot reach). message: Why not (one line).
+        status: ``"ok"``, ``"limits"`` (the shot's timing exceeds a limit),
+            ``"unreachable"`` (frames the robot cannot reach) or ``"lens_range"`` (the shot
+            asks the lens for more than its calibration covers). message: Why not (one
+            line).
         timing: Timing mode. speed_factor: Take duration of the shot / its own duration.
         servo_rate_hz: Servo rate. fps: Film frame rate.
         servo_step_ms: The shortest and longest servo step [ms] (they differ in an optimal
@@ -291,6 +298,13 @@ def from_analysis(
         )
         return data
     frame_times = shot.times - shot.times[0]
+    if isinstance(error, LensRangeError):  # found before the solve: nothing more to show
+        return ReportData(
+            **common, samples=None, status="lens_range", message=str(error),
+            timing=options.timing, speed_factor=math.nan, servo_rate_hz=math.nan,
+            max_speed=math.nan, frame_times=frame_times, shot_start=0.0,
+            shot_end=float(frame_times[-1]),
+        )
     if isinstance(error, UnreachableFramesError) or path is None:
         unreachable = tuple(sorted(int(e.frame) for e in getattr(error, "errors", ())
                                    if e.frame is not None))

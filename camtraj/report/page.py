@@ -87,7 +87,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
         rows.append(("maximum feasible speed",
                      f"{speed_percent(data.max_speed)} of real time (could be shot at "
                      f"{frame_rate(data.fps * data.max_speed)} fps)"))
-    elif data.status != "unreachable":
+    elif data.status not in ("unreachable", "lens_range"):
         rows.append(("maximum feasible speed", "not recorded in this file"))
     if data.status == "ok" and s is not None:
         rows.append(("run-up / run-out",
@@ -176,6 +176,8 @@ def render_html(data: ReportData) -> str:
     elif data.status == "limits":
         status = (f"<p class='status bad'>NOT POSSIBLE with --timing {_e(data.timing)}: "
                   f"{len(data.violations)} limit(s) exceeded.</p>")
+    elif data.status == "lens_range":
+        status = f"<p class='status bad'>OUTSIDE THE LENS'S RANGE: {_e(data.message)}</p>"
     else:
         status = (f"<p class='status bad'>CANNOT BE REACHED: {len(data.unreachable)} "
                   "frame(s) out of the robot's reach.</p>")
