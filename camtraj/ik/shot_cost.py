@@ -322,8 +322,7 @@ class ShotCost:
         """
         sgn = np.sign(z1)
         ahead = np.array([[-1.0], [1.0]]) * sgn  # the run-up's stop is behind its frame
-        room = np.where(ahead > 0, self.upper - q_ends, q_ends - self.lower)
-        v_room = self.stop_speed(np.maximum(room, 1e-12))
+        v_room = self.room_speed(q_ends, ahead > 0)
         dd = self.stop_distance(v_room)[1]  # dD/dV there
         v_max = self.vel / self.dt
         need = np.abs(z1) * v_max / v_room
@@ -456,6 +455,13 @@ class ShotCost:
         dd = np.where(big, v / a + 0.5 * a / j, 1.5 * root)
         return np.asarray(d), np.asarray(dd)
 
+    def room_speed(self, q: Array, toward_upper: NDArray[np.bool_]) -> Array:
+        """The highest speed (..., 8) from which each axis at ``q`` stops before the position
+        limit it moves towards (the upper one where ``toward_upper``): :meth:`stop_speed` of
+        the room left (at least 1e-12: an axis on its limit moving into it has no speed)."""
+        room = np.where(toward_upper, self.upper - q, q - self.lower)
+        return self.stop_speed(np.maximum(room, 1e-12))
+
     def stop_speed(self, room: Array) -> Array:
         """The highest speed (..., 8) from which each axis stops within ``room`` >= 0 [m,
         rad]: :meth:`stop_distance` inverted (below a_max^2 / j_max the stop never reaches
@@ -491,10 +497,8 @@ class ShotCost:
         e = self.edge_intrusion(self.edge_excursion(q_edge, q_inner)[0])
         if not self.edge_room:
             return np.asarray(self.margin * (e * e).sum(axis=-1))
-        d = q_edge - q_inner
-        d = np.where(REVOLUTE, d - TWO_PI * np.rint(d * (1.0 / TWO_PI)), d)
-        room = np.where(d > 0, self.upper - q_edge, q_edge - self.lower)
-        need = np.abs(d) / self.dt / self.stop_speed(np.maximum(room, 1e-12))
+        z1 = self.steps(q_inner, q_edge)  # away from the shot: towards the stop's limit
+        need = np.abs(z1) * (self.vel / self.dt) / self.room_speed(q_edge, z1 > 0)
         over = np.maximum(need - 1.0, 0.0)
         return np.asarray(self.margin * (e * e).sum(axis=-1)
                           + self.overspeed * (over * over).sum(axis=-1))
