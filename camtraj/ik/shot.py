@@ -205,13 +205,19 @@ class StepCosts:
                 qi = qi[:, :1]
             d = qi[1:, :, None, :] - qi[:-1, :, :, None]
             pair += self.cost.axis_step_cost(i, d, self.wrap)
-        # run-up and run-out room at the shot's ends
+        # run-up and run-out room at the shot's ends, a block of rows at a time (the cost's
+        # temporaries are (C, rows, S, 8) each)
+        rows = max(1, _CHUNK // max(c * s, 1))
         if a == 0:
             qs = self.states(y[:2, :, :, :8])  # (2, C, S, 8)
-            pair[0] += self.cost.edge_cost(qs[0, :, :, None, :], qs[1, :, None, :, :])
+            for r in range(0, s, rows):
+                pair[0, :, r:r + rows] += self.cost.edge_cost(qs[0, :, r:r + rows, None, :],
+                                                              qs[1, :, None, :, :])
         if e == n - 1:
             qs = self.states(y[-2:, :, :, :8])
-            pair[-1] += self.cost.edge_cost(qs[-1, :, None, :, :], qs[-2, :, :, None, :])
+            for r in range(0, s, rows):  # from state r at the last frame but one
+                pair[-1, :, r:r + rows] += self.cost.edge_cost(qs[-1, :, None, :, :],
+                                                               qs[-2, :, r:r + rows, None, :])
         if self.held is not None and self.held[a:e].any():
             # a hold of the camera (equal poses, so equal candidates) is a hold of the robot
             pair[self.held[a:e]] = np.where(np.eye(s, dtype=bool), pair[self.held[a:e]],
