@@ -8,6 +8,7 @@ ruckig's time-optimal trajectory.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,14 @@ import pytest
 from camtraj import Robot
 from camtraj.ik import path_margins, solve_path, solve_path_report
 from camtraj.ik.refine import refine
-from camtraj.ik.shot import candidates, chain_costs, choose, choose_each, viterbi
+from camtraj.ik.shot import (
+    candidates,
+    chain_costs,
+    choose,
+    choose_each,
+    choose_ranked,
+    viterbi,
+)
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.timing import Limits, feasible_speed
 
@@ -117,12 +125,30 @@ def test_the_programme_is_the_same_whatever_its_blocks(robot: Robot) -> None:
     cand = candidates(robot, targets, n_track=2, n_extend=2)
     for merged in (False, True):
         unary, steps = chain_costs(cost, cand, merged)
-        whole = steps.block(0, 59)
-        parts = np.concatenate([steps.block(a, min(a + 7, 59)) for a in range(0, 59, 7)])
+        whole = steps.block(0, 59)[0]
+        parts = np.concatenate([steps.block(a, min(a + 7, 59))[0] for a in range(0, 59, 7)])
         assert np.array_equal(whole, parts)
         answers = [viterbi(unary, dataclasses.replace(steps, per=per)) for per in (1, 7, 100)]
         for best, path in answers[1:]:
             assert np.array_equal(best, answers[0][0]) and np.array_equal(path, answers[0][1])
+
+
+def test_rankings_run_together_equal_each_run_alone(robot: Robot) -> None:
+    """The solver ranks the candidates twice (its cost, and margins a tenth as heavy with
+    the ends' room as a use) in one pass over the step costs: each ranking's answers are
+    those of the programme run on its cost alone, bit for bit."""
+    targets = camera_path(robot, 60)
+    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
+    light = dataclasses.replace(cost, margin=0.1 * cost.margin, edge_room=True)
+    cand = candidates(robot, targets, n_track=2, n_extend=2)
+    together = choose_ranked((cost, light), cand, robot.home)
+    for ranking, answers in zip((cost, light), together, strict=True):
+        alone = choose_each(ranking, cand, robot.home)
+        assert [a.cost for a in answers] == [a.cost for a in alone]
+        for a, b in zip(answers, alone, strict=True):
+            assert np.array_equal(a.point, b.point) and np.array_equal(a.branch, b.branch)
+            assert np.array_equal(a.y, b.y)
+    assert [a.cost for a in together[0]] != [a.cost for a in together[1]]  # two rankings
 
 
 def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
@@ -137,7 +163,7 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
     cand = candidates(robot, targets, n_track=1, n_extend=2)
     for merged, frames in ((False, 8), (True, 4)):
         unary, steps = chain_costs(cost, cand, merged)
-        u, p = unary[:frames], steps.block(0, frames - 1)
+        u, p = unary[:frames], steps.block(0, frames - 1)[0]
         best, _ = viterbi(u, steps)
         chains, states = u.shape[1:]
         seqs = np.array(np.unravel_index(np.arange(states ** frames), (states,) * frames)).T

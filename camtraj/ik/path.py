@@ -14,7 +14,7 @@ from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
 from camtraj.ik.refine import REFINE_STAGES, Refinement
-from camtraj.ik.shot import Candidates, camera_holds, candidates, choose_each, measures
+from camtraj.ik.shot import Candidates, camera_holds, candidates, choose_ranked, measures
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.ik.spline_ops import hold_runs
@@ -303,8 +303,7 @@ def _programme(robot: Robot, costs: tuple[ShotCost, ...], targets: Array, start:
     cand = _rescue_empty_frames(robot, targets, cand, frames)
     rows = np.arange(n)
     res = []
-    for cost in costs:
-        choices = choose_each(cost, cand, start, held)
+    for choices in choose_ranked(costs, cand, start, held):
         if not choices:  # pragma: no cover - every frame has a feasible candidate by now
             msg = "internal error: no candidate path through the shot"
             raise RuntimeError(msg)

@@ -181,9 +181,11 @@ class StepCosts:
     (frames, C, S, ...); ``chains``: (C, S); ``shared``: track and extend are the same in
     every chain; ``per``: frames per block; ``held`` (n - 1,): the frame pairs where the
     camera holds still, whose only step is to the same state (the robot holds still too).
+    ``rankings``: the costs the programme ranks paths by; their steps are the first one's
+    (they differ in margins and in the run-up and run-out room, which each adds itself).
     """
 
-    cost: ShotCost
+    rankings: tuple[ShotCost, ...]
     cand: Candidates
     states: Callable[[NDArray[Any]], NDArray[Any]]
     chains: tuple[int, int]
@@ -192,9 +194,9 @@ class StepCosts:
     per: int
     held: NDArray[np.bool_] | None = None
 
-    def block(self, a: int, e: int) -> Array:
-        """Step costs from frames a..e-1 to the next (e - a, C, S, S); infeasible states
-        are left to their unary costs."""
+    def block(self, a: int, e: int) -> list[Array]:
+        """Step costs from frames a..e-1 to the next (e - a, C, S, S), one per ranking;
+        infeasible states are left to their unary costs."""
         y, n = self.cand.y, self.cand.y.shape[0]
         c, s = self.chains
         pair = np.zeros((e - a, c, s, s))
@@ -204,30 +206,36 @@ class StepCosts:
             if self.shared and not REVOLUTE[i]:
                 qi = qi[:, :1]
             d = qi[1:, :, None, :] - qi[:-1, :, :, None]
-            pair += self.cost.axis_step_cost(i, d, self.wrap)
-        # run-up and run-out room at the shot's ends, a block of rows at a time (the cost's
-        # temporaries are (C, rows, S, 8) each)
-        rows = max(1, _CHUNK // max(c * s, 1))
-        if a == 0:
-            qs = self.states(y[:2, :, :, :8])  # (2, C, S, 8)
-            for r in range(0, s, rows):
-                pair[0, :, r:r + rows] += self.cost.edge_cost(qs[0, :, r:r + rows, None, :],
-                                                              qs[1, :, None, :, :])
-        if e == n - 1:
-            qs = self.states(y[-2:, :, :, :8])
-            for r in range(0, s, rows):  # from state r at the last frame but one
-                pair[-1, :, r:r + rows] += self.cost.edge_cost(qs[-1, :, None, :, :],
-                                                               qs[-2, :, r:r + rows, None, :])
+            pair += self.rankings[0].axis_step_cost(i, d, self.wrap)
         if self.held is not None and self.held[a:e].any():
             # a hold of the camera (equal poses, so equal candidates) is a hold of the robot
             pair[self.held[a:e]] = np.where(np.eye(s, dtype=bool), pair[self.held[a:e]],
                                             np.inf)
-        return pair
+        if a > 0 and e < n - 1:
+            return [pair] * len(self.rankings)
+        # run-up and run-out room at the shot's ends, a block of rows at a time (the cost's
+        # temporaries are (C, rows, S, 8) each)
+        rows = max(1, _CHUNK // max(c * s, 1))
+        first, last = self.states(y[:2, :, :, :8]), self.states(y[-2:, :, :, :8])  # (2, C, S, 8)
+        out = []
+        for cost in self.rankings:
+            ranked = pair.copy()
+            for r in range(0, s, rows) if a == 0 else ():
+                ranked[0, :, r:r + rows] += cost.edge_cost(first[0, :, r:r + rows, None, :],
+                                                           first[1, :, None, :, :])
+            for r in range(0, s, rows) if e == n - 1 else ():  # from state r, last but one
+                ranked[-1, :, r:r + rows] += cost.edge_cost(last[-1, :, None, :, :],
+                                                            last[-2, :, r:r + rows, None, :])
+            out.append(ranked)
+        return out
 
 
-def chain_costs(cost: ShotCost, cand: Candidates, merged: bool, wrap: bool = True,
+def chain_costs(cost: ShotCost | tuple[ShotCost, ...], cand: Candidates, merged: bool,
+                wrap: bool = True,
                 held: NDArray[np.bool_] | None = None) -> tuple[Array, StepCosts]:
-    """The dynamic programme's tables (``held``: :attr:`StepCosts.held`).
+    """The dynamic programme's tables (``held``: :attr:`StepCosts.held`), for one cost or
+    for several rankings (:attr:`StepCosts.rankings`: then ``unary`` has a leading axis, one
+    table per ranking).
 
     With ``wrap`` a revolute step is the shorter way round (the joint values of a state are
     one representative of its angle); without, it is the difference of the states' values
@@ -247,19 +255,22 @@ def chain_costs(cost: ShotCost, cand: Candidates, merged: bool, wrap: bool = Tru
         y = y.swapaxes(1, 2)
         return y.reshape(y.shape[0], 1, b * g, *y.shape[3:]) if merged else y[:, alive]
 
+    rankings = cost if isinstance(cost, tuple) else (cost,)
     ok = states(cand.ok)
     c, s = ok.shape[1:]
-    unary = np.empty((n, c, s))  # block by block: the margin cost's temporaries
+    unary = np.empty((len(rankings), n, c, s))  # block by block: the margin's temporaries
     per = max(1, _POINTS // max(c * s, 1))
     for a in range(0, n, per):
-        unary[a:a + per] = np.where(ok[a:a + per], cost.unary(states(cand.y[a:a + per])),
-                                    np.inf)
-    return unary, StepCosts(cost, cand, states, (c, s), shared, wrap,
-                            max(1, _CHUNK // max(c * s * s, 1)), held)
+        y = states(cand.y[a:a + per])
+        for k, ranking in enumerate(rankings):
+            unary[k, a:a + per] = np.where(ok[a:a + per], ranking.unary(y), np.inf)
+    steps = StepCosts(rankings, cand, states, (c, s), shared, wrap,
+                      max(1, _CHUNK // max(c * s * s, 1)), held)
+    return (unary if isinstance(cost, tuple) else unary[0]), steps
 
 
 def viterbi(unary: Array, steps: StepCosts) -> tuple[Array, IntArray]:
-    """Shortest path over frames, one per chain.
+    """Shortest path over frames, one per chain (one ranking: :func:`viterbi_each`).
 
     Args:
         unary: (n, C, S) state costs (inf: infeasible).
@@ -269,25 +280,34 @@ def viterbi(unary: Array, steps: StepCosts) -> tuple[Array, IntArray]:
     Returns:
         The best total cost per chain (C,) and its states (C, n).
     """
-    n, c, s = unary.shape
-    acc = unary[0].copy()
-    back = np.empty((max(n - 1, 0), c, s), dtype=np.intp)
+    return viterbi_each(unary[None], steps)[0]
+
+
+def viterbi_each(unary: Array, steps: StepCosts) -> list[tuple[Array, IntArray]]:
+    """:func:`viterbi` for each of ``steps``' rankings at once (their step costs are computed
+    once): ``unary`` (R, n, C, S), one (best, states) per ranking."""
+    n, c, s = unary.shape[1:]
+    acc = [u[0].copy() for u in unary]
+    back = np.empty((len(acc), max(n - 1, 0), c, s), dtype=np.intp)
     rows = np.arange(c)[:, None]
     cols = np.arange(s)[None, :]
     for a in range(0, n - 1, steps.per):
         e = min(a + steps.per, n - 1)
-        pair = steps.block(a, e)
-        for k in range(a, e):
-            tot = acc[:, :, None] + pair[k - a]
-            arg = np.argmin(tot, axis=1)
-            back[k] = arg
-            acc = tot[rows, arg, cols] + unary[k + 1]
-    path = np.empty((c, n), dtype=np.intp)
-    path[:, -1] = np.argmin(acc, axis=1)
-    best = acc[np.arange(c), path[:, -1]]
-    for k in range(n - 2, -1, -1):
-        path[:, k] = back[k][np.arange(c), path[:, k + 1]]
-    return best, path
+        for r, pair in enumerate(steps.block(a, e)):
+            for k in range(a, e):
+                tot = acc[r][:, :, None] + pair[k - a]
+                arg = np.argmin(tot, axis=1)
+                back[r, k] = arg
+                acc[r] = tot[rows, arg, cols] + unary[r, k + 1]
+    out = []
+    for r in range(len(acc)):
+        path = np.empty((c, n), dtype=np.intp)
+        path[:, -1] = np.argmin(acc[r], axis=1)
+        best = acc[r][np.arange(c), path[:, -1]]
+        for k in range(n - 2, -1, -1):
+            path[:, k] = back[r, k][np.arange(c), path[:, k + 1]]
+        out.append((best, path))
+    return out
 
 
 @dataclass(frozen=True)
@@ -329,45 +349,59 @@ def choose_each(cost: ShotCost, cand: Candidates, start: Array,
     the path itself, inside the limits) and that label's path is taken from there, so every
     answer is inside the limits: an unavoidable wrap shows as the large step it is.
     """
-    out: list[DPChoice] = []
-    laned: dict[int, DPChoice] | None = None
-    for choice in _choose(cost, cand, wrap=True, held=held):
-        y = choice.y.copy()
-        y[:, :8] = unwrap_into_limits(y[:, :8], cost.lower, cost.upper, start)
-        if inside_limits(y[:, :8], cost.lower, cost.upper):
-            out.append(DPChoice(choice.cost, choice.point, choice.branch, y))
-            continue
-        if laned is None:
-            again = replace(cand, y=lanes(cand.y, cost.lower, cost.upper, start))
-            laned = {int(c.branch[0]): c for c in _choose(cost, again, wrap=False,
-                                                          held=held)}
-        if int(choice.branch[0]) in laned:
-            out.append(laned[int(choice.branch[0])])
-    return sorted(out, key=lambda c: c.cost)
+    return choose_ranked((cost,), cand, start, held)[0]
 
 
-def _choose(cost: ShotCost, cand: Candidates, wrap: bool,
-            held: NDArray[np.bool_] | None = None) -> list[DPChoice]:
-    """The cheapest path of each label that reaches every frame (else of the merged chains),
-    cheapest first."""
+def choose_ranked(rankings: tuple[ShotCost, ...], cand: Candidates, start: Array,
+                  held: NDArray[np.bool_] | None = None) -> list[list[DPChoice]]:
+    """:func:`choose_each` for each of several rankings of the same candidates (costs that
+    differ in their margins and ends' room, :attr:`StepCosts.rankings`), their step costs
+    computed once: one list of answers per ranking."""
+    lower, upper = rankings[0].lower, rankings[0].upper
+    laned: list[dict[int, DPChoice]] | None = None
+    result = []
+    for r, choices in enumerate(_choose(rankings, cand, wrap=True, held=held)):
+        out: list[DPChoice] = []
+        for choice in choices:
+            y = choice.y.copy()
+            y[:, :8] = unwrap_into_limits(y[:, :8], lower, upper, start)
+            if inside_limits(y[:, :8], lower, upper):
+                out.append(DPChoice(choice.cost, choice.point, choice.branch, y))
+                continue
+            if laned is None:
+                again = replace(cand, y=lanes(cand.y, lower, upper, start))
+                laned = [{int(c.branch[0]): c for c in ranked}
+                         for ranked in _choose(rankings, again, wrap=False, held=held)]
+            if int(choice.branch[0]) in laned[r]:
+                out.append(laned[r][int(choice.branch[0])])
+        result.append(sorted(out, key=lambda c: c.cost))
+    return result
+
+
+def _choose(rankings: tuple[ShotCost, ...], cand: Candidates, wrap: bool,
+            held: NDArray[np.bool_] | None = None) -> list[list[DPChoice]]:
+    """Per ranking, the cheapest path of each label that reaches every frame (else of the
+    merged chains), cheapest first."""
     n, g = cand.r1.shape
     for merged in (False, True):
-        unary, steps = chain_costs(cost, cand, merged, wrap, held)
-        best, path = viterbi(unary, steps)
+        unary, steps = chain_costs(rankings, cand, merged, wrap, held)
         labels = (np.zeros(1, dtype=np.intp) if merged
                   else np.flatnonzero(cand.ok.any(axis=1).all(axis=0)))
-        out = []
-        for c in np.argsort(best, kind="stable"):
-            if not math.isfinite(best[c]):
-                break
-            states = path[c]
-            branch = states // g if merged else np.full(n, labels[c])
-            point = states % g if merged else states
-            y = cand.y[np.arange(n), point, branch].copy()
-            out.append(DPChoice(float(best[c]), point, branch, y))
-        if out:
-            return out
-    return []
+        outs = []
+        for best, path in viterbi_each(unary, steps):
+            out = []
+            for c in np.argsort(best, kind="stable"):
+                if not math.isfinite(best[c]):
+                    break
+                states = path[c]
+                branch = states // g if merged else np.full(n, labels[c])
+                point = states % g if merged else states
+                y = cand.y[np.arange(n), point, branch].copy()
+                out.append(DPChoice(float(best[c]), point, branch, y))
+            outs.append(out)
+        if all(outs):  # the rankings share their feasible paths: all or none
+            return outs
+    return [[] for _ in rankings]
 
 
 def inside_limits(q: Array, lower: Array, upper: Array) -> bool:
