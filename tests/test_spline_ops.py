@@ -89,6 +89,37 @@ def test_operators_with_holds_give_the_timing_stages_spline(
             assert not got[a + 1:b].any() and (rows == n or not got[a:b].any())
 
 
+@pytest.mark.parametrize("held", [False, True])
+def test_a_long_smooth_move_far_from_zero_shows_only_its_own_derivatives(
+        robot: Robot, held: bool) -> None:
+    """A minute-long eased move of 5 m of track starting 1 m out, free or held still for three
+    frames at each end: in the middle of the move, where the spline's acceleration and jerk
+    are small, the operators give them to 1% of their own size there. Cut to the band, the
+    held move's rows read the move's velocity as jerk 2,000 times the spline's own (and
+    the refinement lowered that phantom instead of the take's use)."""
+    n = 1440
+    s = 0.5 - 0.5 * np.cos(np.pi * np.arange(n) / (n - 1))
+    q = np.tile(0.5 * (robot.lower + robot.upper), (n, 1))
+    q[:, 0] = 1.0 + 5.0 * s
+    q[:, 3] = 0.3 + 0.5 * s
+    hold = np.zeros(n - 1, dtype=bool)
+    if held:
+        hold[:3] = hold[-3:] = True
+        q[1:4], q[-4:-1] = q[0], q[-1]
+    limits = Limits.from_robot(robot)
+    path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, hold)
+    ops = spline_ops(n, hold_runs(hold))
+    values = ops.apply(q)
+    middle = slice(60, n - 60)
+    for i, order in enumerate(ops.orders):
+        x = np.arange(n, dtype=float) if ops.rows[i] == n else np.arange(n - 1) + 0.5
+        want = path.at(x, 3)[order][middle]
+        got = values[:ops.rows[i]][middle, :, i]
+        for axis in (0, 3):
+            scale = np.abs(want[:, axis]).max()
+            assert np.abs(got[:, axis] - want[:, axis]).max() <= 0.01 * scale, (order, axis)
+
+
 def test_refinement_gradient_is_the_derivative_of_its_objective(robot: Robot) -> None:
     """Directional derivatives of ``refine_total`` along random directions in the measures
     (through a random Jacobian) against the normal equations' gradient."""

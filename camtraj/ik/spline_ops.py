@@ -223,21 +223,53 @@ def _stretch(n: int, clamp: tuple[bool, bool]) -> tuple[Array, tuple[int, int]]:
                             0.0)
         else:  # d or fewer frames lie on a polynomial below degree d: the derivative is zero
             band = np.zeros(idx.shape)
+        stencil = np.diff(np.eye(undo + 1), undo, axis=0)[0]  # the differences' weights
+        cut = np.zeros((rows_m, width))
+        for j, c in enumerate(stencil):
+            cut[:, j:j + wa] += c * band
+        cut = _polynomials_kept(resp, cut, -k)
         rows = rows_m + (n - m)
-        a = np.zeros((rows, wa))
         if small:
-            a[:] = band
+            coef[:rows, :, i] = cut
             inner = (0, 0)
         else:
             half = rows_m // 2
-            a[:half] = band[:half]
-            a[rows - (rows_m - half):] = band[half:]
-            a[half:rows - (rows_m - half)] = band[half]  # the shift-invariant kernel
+            coef[:half, :, i] = cut[:half]
+            coef[rows - (rows_m - half):rows, :, i] = cut[half:]
+            coef[half:rows - (rows_m - half), :, i] = cut[half]  # the shift-invariant kernel
             inner = (max(inner[0], half), min(inner[1], rows - (rows_m - half)))
-        stencil = np.diff(np.eye(undo + 1), undo, axis=0)[0]  # the differences' weights
-        for j, c in enumerate(stencil):
-            coef[:rows, j:j + wa, i] += c * a
     return coef, inner
+
+
+CUT_DEGREE = 4
+"""Each operator row keeps its exact value on every polynomial of degree up to this."""
+
+
+def _polynomials_kept(resp: Array, cut: Array, offset: int) -> Array:
+    """The band rows ``cut`` (rows, width) of the dense responses ``resp`` (rows, m) (row r
+    reads frames r + offset ...), each changed as little as can be so that it gives its dense
+    row's value on every polynomial of degree up to :data:`CUT_DEGREE` (zero weight outside
+    the path).
+
+    Next to a hold the spline reproduces only constants, so its rows are cut as weights of
+    first differences, and the cut tail multiplies the path's velocity: on a minute-long
+    eased move clamped to rest at both ends, the cut rows gave jerk 2,000 times the spline's
+    own in the middle of the move, and the refinement lowered that phantom instead of the
+    take's use. Kept exact on polynomials, the rows are exact wherever the path is locally
+    one (a free spline's cut of d-th differences already is below degree d and changes
+    little)."""
+    rows, m = resp.shape
+    width = cut.shape[1]
+    out = cut.copy()
+    frames = np.arange(m, dtype=float)
+    for r in range(rows):
+        cols = np.arange(r + offset, r + offset + width)
+        inside = (cols >= 0) & (cols < m)
+        basis = np.vander((frames - r) / width, CUT_DEGREE + 1, increasing=True)
+        a = basis[cols[inside]].T  # (degree + 1, columns inside the path)
+        kept = cut[r, inside]
+        out[r, inside] = kept + np.linalg.pinv(a) @ (resp[r] @ basis - a @ kept)
+    return out
 
 
 __all__ = ["HALF_WIDTH", "BandOps", "hold_runs", "spline_ops", "windows"]
