@@ -369,10 +369,12 @@ def test_the_run_out_room_is_one_of_the_takes_uses(robot: Robot) -> None:
 
 
 def test_room_need_is_the_slow_down_whose_stop_ends_on_the_limit(robot: Robot) -> None:
-    """Each end's room need s: the axis leaving its end frame at V / s (V its real-time
-    speed) stops exactly on the position limit ahead (the run-up's behind), as ruckig's
-    time-optimal stop from that speed under the robot's acceleration and jerk limits has
-    it; and the needs' derivatives in the frames are their central differences."""
+    """Each end's room need s: the axis leaving its end frame at V / s with acceleration
+    A / s^2 along its motion (V, A at real time; the run-up's state reversed) stops exactly
+    on the position limit ahead (the run-up's behind), as ruckig's time-optimal stop from
+    that state under the robot's acceleration and jerk limits has it (an axis still braking
+    stops within the room: its need is taken without the braking); and the needs'
+    derivatives in the frames are their central differences."""
     from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
 
     dt, n = 1.0 / 25.0, 40
@@ -385,15 +387,21 @@ def test_room_need_is_the_slow_down_whose_stop_ends_on_the_limit(robot: Robot) -
     need, lin, frames = use.ends
     assert need.shape == (4, 8) and list(frames) == [0, n - 1, 0, n - 1]
     z1 = use.z[[0, -1], :, 0]  # velocity usages at the end knots
+    z2 = use.z[[0, -1], :, 2]  # and acceleration usages
     v_real = z1 * robot.max_velocity
+    pushed = braking = 0
     for end, frame in ((0, 0), (1, n - 1)):
         for axis in range(8):
             s = need[2 + end, axis]
+            ahead = np.sign(z1[end, axis]) * (1.0 if end else -1.0)
+            along = z2[end, axis] * ahead * robot.max_acceleration[axis]
+            pushed += along > 0.0
+            braking += along < 0.0
             inp = InputParameter(1)
             inp.control_interface = ControlInterface.Velocity
             inp.current_position = [0.0]
             inp.current_velocity = [abs(v_real[end, axis]) / s]
-            inp.current_acceleration = [0.0]
+            inp.current_acceleration = [along / (s * s)]
             inp.target_velocity = inp.target_acceleration = [0.0]
             inp.max_velocity = [1e9]
             inp.max_acceleration = [float(robot.max_acceleration[axis])]
@@ -401,10 +409,13 @@ def test_room_need_is_the_slow_down_whose_stop_ends_on_the_limit(robot: Robot) -
             traj = Trajectory(1)
             assert Ruckig(1).calculate(inp, traj) == Result.Working
             stop = traj.at_time(traj.duration)[0][0]
-            ahead = np.sign(z1[end, axis]) * (1.0 if end else -1.0)
             room = (robot.upper[axis] - q[frame, axis] if ahead > 0
                     else q[frame, axis] - robot.lower[axis])
-            assert stop == pytest.approx(room, rel=1e-9), (end, axis)
+            if along >= 0.0:
+                assert stop == pytest.approx(room, rel=1e-9), (end, axis)
+            else:
+                assert stop <= room, (end, axis)
+    assert pushed >= 4 and braking >= 4  # both kinds of end state are checked
     rooms = np.outer([1e-6, 1e-3, 0.05, 0.5, 3.0], np.ones(8))  # both branches of the stop
     np.testing.assert_allclose(cost.stop_distance(cost.stop_speed(rooms))[0], rooms, rtol=1e-12)
     h = 1e-6

@@ -137,6 +137,40 @@ def _stop_root(a1: Array, g: Array) -> Array:
     return np.array(s)
 
 
+def _stop_from(v: float, a: float, j: float, a_max: float) -> tuple[float, float, float]:
+    """The shortest stopping distance from speed v >= 0 with acceleration a >= 0 along the
+    motion under jerk j and acceleration a_max, and its derivatives in v and a. The stop
+    pulls the acceleration down at full jerk at once: the first a / j of it brings a to
+    zero (the speed rises by a^2 / 2j), the rest is the stop from that speed at rest
+    acceleration (:meth:`ShotCost.stop_distance`)."""
+    t = a / j
+    top = v + 0.5 * a * t
+    if top >= a_max * a_max / j:
+        d0, d0_v = 0.5 * top * (top / a_max + a_max / j), top / a_max + 0.5 * a_max / j
+    else:
+        root = math.sqrt(top / j)
+        d0, d0_v = top * root, 1.5 * root
+    return v * t + a * t * t / 3.0 + d0, t + d0_v, v / j + a * t / j + d0_v * t
+
+
+def _stop_root_pushed(v: float, a: float, room: float, j: float, a_max: float,
+                      u: float) -> tuple[float, float, float, float]:
+    """The u where the stop from (v u, a u^2) (:func:`_stop_from`) is ``room`` long, by
+    Newton's method from ``u`` above it (the distance grows and is convex in u, so the
+    steps fall to the root without overshooting), and du / dv, du / da, du / d room. In
+    Python floats: a handful of values, where each numpy operation costs more than the
+    arithmetic."""
+    for _ in range(60):
+        dist, d_v, d_a = _stop_from(v * u, a * u * u, j, a_max)
+        step = (dist - room) / (d_v * v + d_a * 2.0 * a * u)
+        u -= step
+        if abs(step) <= 1e-14 * u:
+            break
+    _, d_v, d_a = _stop_from(v * u, a * u * u, j, a_max)
+    slope = d_v * v + d_a * 2.0 * a * u
+    return u, -d_v * u / slope, -d_a * u * u / slope, 1.0 / slope
+
+
 @dataclass(frozen=True)
 class TakeUse:
     """A path's use of the limits: the spline's velocity, acceleration and jerk usages
@@ -291,30 +325,33 @@ class ShotCost:
                + rows[:, 1, :, None] * (d2 / self.acc)[:, None, :])
         if not self.room:
             return TakeUse(ops, z, (need, lin, np.array([0, n - 1], dtype=np.intp)))
-        room, room_lin = self.room_needs(q[[0, -1]], vel_z, rows[:, 0], -ops.offset)
+        room, room_lin = self.room_needs(q[[0, -1]], vel_z, acc_z, rows, -ops.offset)
         return TakeUse(ops, z, (np.concatenate([need, room]), np.concatenate([lin, room_lin]),
                                 np.array([0, n - 1, 0, n - 1], dtype=np.intp)))
 
-    def room_needs(self, q_ends: Array, z1: Array, vel_rows: Array,
+    def room_needs(self, q_ends: Array, z1: Array, z2: Array, rows: Array,
                    at: int) -> tuple[Array, Array]:
         """The slow-down each end's stop needs to fit between the end frame and the position
         limit ahead of it (the run-out's; the run-up's behind the first frame), as a usage.
 
-        At real time an axis leaves its last frame at speed V = |z1| v_max; from speed V / s
-        it stops within D(V / s) (:meth:`stop_distance`, the robot's own acceleration and
-        jerk: the timing stage's run-out where its room decides the speed), so the room R to
-        the limit allows s >= V / D^-1(R). A take slowed down to fit its run-out is as slow as
+        At real time an axis leaves its last frame at speed V = |z1| v_max with acceleration
+        A along its motion (the run-up's state reversed in time); from (V / s, A / s^2) it
+        stops within D (:func:`_stop_from`, the robot's own acceleration and jerk:
+        the timing stage's run-out where its room decides the speed), so the room R to the
+        limit allows the s where D = R. A take slowed down to fit its run-out is as slow as
         one slowed down for a velocity limit, so this need is a use like the others: the
         objective weighs it against the rest of the take instead of taking a stop past a
         limit at the aimed speed as a failure (a truck ending at the arm's full reach past the
         track's end: 0.22x real time, slower than ``paper``'s 0.28x; with this need 0.34x).
         R = 0 with the axis moving into its limit: no slow-down fits (R is floored at 1e-12,
-        a need in the millions).
+        a need in the millions). An end still braking (A against the motion) is taken as
+        not accelerating: its stop is shorter, so the need is on the safe side.
 
         Args:
             q_ends: The first and last frames' positions (2, 8).
-            z1: The spline's velocity usages there (2, 8).
-            vel_rows: The operator rows that read z1 (2, width), times the velocity limit.
+            z1, z2: The spline's velocity and acceleration usages there (2, 8).
+            rows: The operator rows that read z1 and z2 (2 ends, 2, width), times their
+                limits.
             at: The end frame's column in those rows.
 
         Returns:
@@ -322,15 +359,54 @@ class ShotCost:
         """
         sgn = np.sign(z1)
         ahead = np.array([[-1.0], [1.0]]) * sgn  # the run-up's stop is behind its frame
-        v_room = self.room_speed(q_ends, ahead > 0)
-        dd = self.stop_distance(v_room)[1]  # dD/dV there
+        ahead = np.where(sgn == 0.0, np.sign(z2), ahead)  # from rest: where it accelerates
+        room = np.maximum(np.where(ahead > 0, self.upper - q_ends, q_ends - self.lower), 1e-12)
         v_max = self.vel / self.dt
-        need = np.abs(z1) * v_max / v_room
-        d_z1 = sgn * v_max / v_room
-        d_room = -need / (v_room * dd)
-        lin = vel_rows[:, :, None] * (d_z1 / self.vel)[:, None, :]
-        lin[:, at, :] += d_room * -ahead  # dR/dq: -1 towards the upper limit
+        speed = np.abs(z1) * v_max
+        acc = np.maximum(z2 * ahead, 0.0) * self.a_max
+        u, d_speed, d_acc, d_room = self.stop_slowness(speed, acc, room)
+        need = np.where(u > 0.0, 1.0 / np.where(u > 0.0, u, 1.0), 0.0)
+        # d need = -du / u^2 with du from the stop's distance held at the room
+        k = -need * need
+        d_z1 = k * d_speed * sgn * v_max
+        d_z2 = k * d_acc * np.where(z2 * ahead > 0.0, ahead, 0.0) * self.a_max
+        lin = (rows[:, 0, :, None] * (d_z1 / self.vel)[:, None, :]
+               + rows[:, 1, :, None] * (d_z2 / self.acc)[:, None, :])
+        lin[:, at, :] += k * d_room * -ahead  # dR/dq: -1 towards the upper limit
         return need, lin
+
+    def stop_slowness(self, speed: Array, acc: Array,
+                      room: Array) -> tuple[Array, Array, Array, Array]:
+        """The largest u (..., 8) for which each axis stops from (speed u, acc u^2) within
+        ``room`` (acc >= 0 along the motion), and du / d speed, du / d acc, du / d room.
+
+        The distance D(V u, A u^2) (:func:`_stop_from`) grows and is convex in u,
+        so Newton's method from an upper bound (the root without A, or with A alone) falls
+        to the root from above without overshooting. An axis neither moving nor
+        accelerating has u = inf (its need is 0; its derivatives are 0)."""
+        u = np.full(speed.shape, np.inf)
+        moving = speed > 0.0
+        u[moving] = self.stop_speed(room)[moving] / speed[moving]
+        pushed = acc > 0.0
+        j = np.broadcast_to(self.j_max, speed.shape)
+        with np.errstate(divide="ignore"):
+            alone = np.where(pushed, (3.0 * j * j * room / np.where(pushed, acc, 1.0) ** 3)
+                             ** (1.0 / 6.0), np.inf)
+        u = np.minimum(u, alone)
+        ds, da, dr = (np.zeros(speed.shape) for _ in range(3))
+        plain = moving & ~pushed  # u = stop_speed(R) / V: D0(V u) = R
+        if plain.any():
+            d0 = self.stop_distance(speed * np.where(plain, u, 0.0))[1]
+            ds = np.where(plain, -u / np.maximum(speed, 1e-300), 0.0)
+            dr = np.where(plain, 1.0 / np.maximum(d0 * speed, 1e-300), 0.0)
+        if pushed.any():
+            idx = np.nonzero(pushed)
+            got = [_stop_root_pushed(*args) for args in zip(
+                speed[idx].tolist(), acc[idx].tolist(), room[idx].tolist(), j[idx].tolist(),
+                np.broadcast_to(self.a_max, speed.shape)[idx].tolist(), u[idx].tolist(),
+                strict=True)]
+            u[idx], ds[idx], da[idx], dr[idx] = np.array(got).T
+        return u, ds, da, dr
 
     def edge_needs(self, z1: Array, z2: Array) -> tuple[Array, Array, Array]:
         """The slow-down each end's stop needs to stay under the velocity limit, as a usage.
