@@ -417,9 +417,9 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     in its value is dz[r, :, i] (rows, 8, k), its Gauss-Newton curvature w[r, :, i]: frame f
     gets sum coef[r, f - r - offset, i] dz[r, :, i], and the pair (f, f + d)
     sum coef[r, o, i] coef[r, o + d, i] w[r, :, i]. The shift-invariant rows are
-    correlations (the gradient: one product, then a shifted add per tap; the curvature: one
-    product over windows of rows); the rows near the ends, each with its own weights, as one
-    batched product of their taps' pair products.
+    correlations (the gradient: one product, then a shifted add per tap; the curvature:
+    :func:`_correlate`); the rows near the ends, each with its own weights, as one batched
+    product of their taps' pair products.
     """
     coef = ops.coef
     rows, width, _ = coef.shape
@@ -428,14 +428,10 @@ def _gather(ops: BandOps, dz: Array, w: Array, gq: Array, M: Array, pad: int) ->
     if b > a:
         kern = coef[a]  # (width, k)
         span = b - a + width - 1
-        taps = dz[a:b] @ kern.T  # (rows, 8, width): what row r gives frame r + o
+        taps = kern @ dz[a:b].reshape(-1, kern.shape[1]).T  # (width, rows * 8): tap o's part
         for o in range(width):
-            gq[base + a + o:base + b + o] += taps[:, :, o]
-        # the pair (f, f + d) gets sum over taps o of row f - o's w times the taps' product:
-        # one correlation over windows of rows (one batched product: no path search)
-        M[:width, base + a:base + a + span] += np.einsum(
-            "takj,jkd->dta", _windows(w[a:b], width), ops.inner_pairs[::-1],
-            optimize=["einsum_path", (0, 1)])
+            gq[base + a + o:base + b + o] += taps[o].reshape(b - a, -1)
+        M[:width, base + a:base + a + span] += _correlate(w[a:b], ops.inner_pairs)
     for (lo, hi), pair_products in zip(((0, a), (b, rows)) if b > a else ((0, rows), (0, 0)),
                                        ops.edge_pairs, strict=True):
         if hi <= lo:
@@ -473,12 +469,27 @@ def _diagonal_sums(v: Array) -> Array:
     return np.asarray(table.sum(axis=1))
 
 
-def _windows(v: Array, width: int) -> Array:
-    """Windows (rows + width - 1, ..., width) over the rows of v (rows, ...): window t holds
-    rows t - width + 1 .. t (zero before the first and after the last row)."""
-    padded = np.zeros((v.shape[0] + 2 * (width - 1), *v.shape[1:]))
-    padded[width - 1:width - 1 + v.shape[0]] = v
-    return windows(padded, width)
+def _correlate(w: Array, pairs: Array) -> Array:
+    """The curvature (width, rows + width - 1, m) the shift-invariant rows w (rows, m, k) give
+    the frame pairs: [d, t] sums pairs[o, i, d] w[t - o, :, i] over taps o and operators i
+    (zero outside the rows), frame t counted from the first row's first tap.
+
+    One product of the pairs (width, width * k) with a table whose row (j, i) is operator i's
+    values from row j - width + 1 on, frames along the row: each table row is one contiguous
+    run of an operator-major copy of w, so the table is built by block copies instead of a
+    transpose of windows (the same product, term for term, as an einsum over those windows).
+    """
+    rows, m, k = w.shape
+    width = pairs.shape[0]
+    span = rows + width - 1
+    by_op = np.zeros((k, rows + 2 * (width - 1), m))
+    by_op[:, width - 1:width - 1 + rows] = w.transpose(2, 0, 1)
+    flat = by_op.reshape(k, -1)
+    item = flat.itemsize
+    table = np.lib.stride_tricks.as_strided(flat, (width, k, span * m),
+                                            (m * item, flat.strides[0], item))
+    left = pairs[::-1].transpose(2, 0, 1).reshape(width, width * k)
+    return np.asarray(left @ table.reshape(width * k, span * m)).reshape(width, span, m)
 
 
 @dataclass(frozen=True)

@@ -87,8 +87,10 @@ def powers(a: Array, ex: Array) -> Array:
     """``a ** ex`` for a (..., k) >= 0 and one exponent per column, ex (k,). The
     continuation's exponents are whole numbers (power / order: 6 / 3 = 2, ..., 48 / 1 = 48),
     taken by repeated squaring, which is several times faster than ``pow`` and as exact; a
-    run of columns with the same exponent is done at once."""
-    out = np.empty(a.shape)
+    run of columns with the same exponent is done at once, on a column-major copy (a run of
+    columns is then one contiguous block, not short strided rows), returned in a's order."""
+    by_col = np.ascontiguousarray(np.moveaxis(a, -1, 0))
+    out = np.empty(by_col.shape)
     k = ex.shape[0]
     j = 0
     while j < k:  # each run of columns with the same exponent at once
@@ -96,11 +98,12 @@ def powers(a: Array, ex: Array) -> Array:
         end = j + 1
         while end < k and ex[end] == e:
             end += 1
-        part = a[..., j:end]
-        whole = e.is_integer() and 0.0 <= e <= 1024.0
-        out[..., j:end] = _whole_power(part, int(e)) if whole else part ** e
+        if e.is_integer() and 0.0 <= e <= 1024.0:
+            out[j:end] = _whole_power(by_col[j:end], int(e))
+        else:  # pow on the columns as they lie in a (its vector loops depend on the layout)
+            out[j:end] = np.moveaxis(a[..., j:end] ** e, -1, 0)
         j = end
-    return out
+    return np.ascontiguousarray(np.moveaxis(out, 0, -1))
 
 
 def _whole_power(a: Array, e: int) -> Array:
