@@ -522,13 +522,18 @@ class _Tie:
         e = self.run[k + d] - rk
         same = (e == 0) & (d > 0)
         blocks[same] += blocks[same].swapaxes(-1, -2)
-        Hr = np.zeros((self.count, width, 2, 2))
-        np.add.at(Hr, (rk, e), blocks)
-        gr = np.zeros((self.count, 2))
-        wr = np.zeros((self.count, 2))
-        np.add.at(gr, self.run, g)
-        np.add.at(wr, self.run, w)
-        return Hr, gr, wr
+        # bincount adds in the order of its input, as np.add.at does, at a fraction of its cost
+        cell = rk * width + e
+        Hr = np.empty((self.count, width, 2, 2))
+        for p in range(2):
+            for q in range(2):
+                Hr[:, :, p, q] = np.bincount(cell, blocks[:, p, q],
+                                             self.count * width).reshape(self.count, width)
+        return Hr, self._sum(g), self._sum(w)
+
+    def _sum(self, v: Array) -> Array:
+        """The runs' sums (runs, 2) of per-frame values v (n, 2)."""
+        return np.stack([np.bincount(self.run, v[:, c], self.count) for c in range(2)], axis=1)
 
     def expand(self, step: Array) -> Array:
         """The frames' values (n, 2) of the runs' values (runs, 2)."""

@@ -513,10 +513,16 @@ class ShotCost:
                           + self.overspeed * (over * over).sum(axis=-1))
 
     def intrusion(self, y: Array) -> Array:
-        """Margin intrusions max(0, 1 - d / zone) (..., 10) of measures y (..., 10)."""
-        d = np.concatenate([np.minimum(y[..., :8] - self.lower, self.upper - y[..., :8]),
-                            y[..., 8:]], axis=-1)
-        return np.asarray(np.maximum(1.0 - d / self.zone, 0.0))
+        """Margin intrusions max(0, 1 - d / zone) (..., 10) of measures y (..., 10), computed
+        in one buffer (the refinement measures every trial step)."""
+        d = np.empty(y.shape)
+        axes = d[..., :8]
+        np.subtract(y[..., :8], self.lower, out=axes)
+        np.minimum(axes, self.upper - y[..., :8], out=axes)
+        d[..., 8:] = y[..., 8:]
+        d /= self.zone
+        np.subtract(1.0, d, out=d)
+        return np.maximum(d, 0.0, out=d)
 
     def unary(self, y: Array) -> Array:
         """Margin cost (...) of frames with measures y (..., 10)."""
