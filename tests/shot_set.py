@@ -32,6 +32,7 @@ Array = NDArray[np.float64]
 SHOTS = Path(__file__).resolve().parent.parent / "samples" / "shots"
 SAMPLES = ("maya_dolly_push_in.usda", "blender_crane_up.usda", "orbit_animated_parent.usda",
            "whip_pan.usda")
+LONG_SHOT = "make_samples long shot 1 min (Z-up m)"
 
 
 def make_samples() -> ModuleType:
@@ -681,9 +682,13 @@ def _read(robot: Robot, path: Path, name: str, kind: str,
 
 
 def acceptance_set(robot: Robot, folder: Path, *, quick: bool = False) -> list[SetShot]:
-    """Issue 13's shot set: the samples (without the unreachable one) and the authored moves
+    """Issue 13's shot set: the samples (without the unreachable one), the one-minute move
+    ``make bench`` converts (``make_samples.py --long-shot``) and the authored moves
     (``quick``: without the long ones), each a USD stage in ``folder`` read back."""
     out = [_read(robot, SHOTS / s, Path(s).stem, "sample", None) for s in SAMPLES]
+    if not quick:  # the minute-long move make bench converts, held at both ends
+        long = make_samples().write_long_shot(folder / "long_shot.usda")
+        out.append(_read(robot, long, LONG_SHOT, "long", None))
     for design in _designs():
         if quick and design.kind == "long":
             continue
