@@ -260,16 +260,20 @@ def _polynomials_kept(resp: Array, cut: Array, offset: int) -> Array:
     little)."""
     rows, m = resp.shape
     width = cut.shape[1]
-    out = cut.copy()
-    frames = np.arange(m, dtype=float)
-    for r in range(rows):
-        cols = np.arange(r + offset, r + offset + width)
-        inside = (cols >= 0) & (cols < m)
-        basis = np.vander((frames - r) / width, CUT_DEGREE + 1, increasing=True)
-        a = basis[cols[inside]].T  # (degree + 1, columns inside the path)
-        kept = cut[r, inside]
-        out[r, inside] = kept + np.linalg.pinv(a) @ (resp[r] @ basis - a @ kept)
-    return out
+    r = np.arange(rows)[:, None]
+    cols = r + offset + np.arange(width)[None, :]  # (rows, width)
+    inside = (cols >= 0) & (cols < m)
+    # each row's polynomials in frames from the row, scaled by the band's width
+    basis = np.vander(((np.arange(m)[None, :] - r) / width).ravel(), CUT_DEGREE + 1,
+                      increasing=True).reshape(rows, m, CUT_DEGREE + 1)
+    want = np.einsum("rm,rmd->rd", resp, basis)  # each row's values on them
+    band = np.take_along_axis(basis, np.clip(cols, 0, m - 1)[:, :, None], axis=1)
+    band *= inside[:, :, None]  # (rows, width, degree + 1); no weight outside the path
+    kept = np.where(inside, cut, 0.0)
+    miss = want - np.einsum("rw,rwd->rd", kept, band)
+    # the least change of each row's weights that gives its values: pinv of (degree + 1, width)
+    fix = np.einsum("rwd,rd->rw", np.linalg.pinv(band.transpose(0, 2, 1)), miss)
+    return np.asarray(kept + fix * inside)
 
 
 __all__ = ["HALF_WIDTH", "BandOps", "hold_runs", "spline_ops", "windows"]
