@@ -227,6 +227,40 @@ def test_refinement_never_slows_the_take(robot: Robot, n: int) -> None:
     assert dp < 1e-9 and dr < 1e-9
 
 
+def test_a_start_with_grid_steps_is_smoothed_before_the_refinement(robot: Robot) -> None:
+    """A start whose track jumps between grid points from frame to frame (5 mm up and down,
+    as the programme's grid does where it switches points) has jerk the refinement would
+    spend its rounds taking out: the refinement starts from the curves low-passed, a take
+    many times faster, and every frame still reaches its pose exactly."""
+    from camtraj.ik.refine import Refinement
+    from camtraj.ik.shot import branch_measures
+
+    n = 120
+    targets = camera_path(robot, n)
+    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
+    cand = candidates(robot, targets, n_track=2, n_extend=2)
+    choice = choose(cost, cand, robot.home)
+    assert choice is not None
+    rows = np.arange(n)
+    j = cand.interval[rows, choice.point]
+    lo, hi = cand.track_lo[rows, j], cand.track_hi[rows, j]
+    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
+    x0[:, 0] = np.clip(x0[:, 0] + 0.005 * (-1.0) ** rows, lo, hi)
+    y0, ok = branch_measures(robot, targets, x0[:, 0], x0[:, 1], choice.y[:, :8],
+                             choice.branch)
+    assert ok.all()
+    limits = Limits.from_robot(robot)
+    times = np.arange(n) / 24.0
+
+    def speed(q: np.ndarray) -> float:
+        return feasible_speed(q, times, limits)
+
+    run = Refinement(robot, cost, targets, choice.branch, x0, y0, lo, hi, take_speed=speed)
+    assert run.best[0] >= 5.0 * speed(y0[:, :8])
+    dp, dr = pose_error(robot.fk(run.y[:, :8]), targets)
+    assert dp < 1e-9 and dr < 1e-9
+
+
 def test_the_first_frame_is_chosen_for_the_shot_not_the_start(robot: Robot) -> None:
     targets = camera_path(robot, 48)
     a = solve_path_report(robot, targets, robot.home, frame_interval=1 / 24)
