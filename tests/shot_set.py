@@ -320,6 +320,8 @@ def _designs() -> list[Design]:
                     orbit((6.0, 0.5, 1.2), 1.8, 1.3, -90.0, False), 10.0, 25.0, "Y", 0.01))
     d.append(Design("orbit 360 low eased 8 s (Z-up m, 48 fps)",
                     orbit((7.0, -0.3, 1.1), 1.5, 0.5, 90.0, True), 8.0, 48.0))
+    d.append(Design("orbit 360 eased 15 s (Z-up m, 60 fps)",
+                    orbit((5.5, 0.8, 1.0), 2.2, 1.7, 0.0, True), 15.0, 60.0))
 
     def crane_top(x0: float, pan0: float, pan1: float) -> Callable[[Array, Array], Cam]:
         def build(t: Array, u: Array) -> Cam:  # rise and tilt until looking straight down

@@ -26,6 +26,13 @@ Array = NDArray[np.float64]
 #: Starts whose take after the first refinement stage is within this share of the fastest
 #: one's all run the remaining stages.
 CLOSE_STARTS = 0.01
+#: An arm configuration whose start ends the refinement's first stage below this share of the
+#: fastest start's speed gets a second start from the programme on twice the track values:
+#: on the coarse grid its path can be forced into steps between far grid points that no
+#: refinement takes out (a 15 s eased orbit: that arm's start 0.019x real time after its first
+#: stage, the take 1.64x; from the finer grid 1.78x and 2.51x; 10x the effort 2.50x). On the
+#: shot set it runs for a few shots and changes none of their speeds.
+SLOW_ARM = 0.1
 #: The margin weight of the programme's second ranking of starts, as a share of the robot
 #: file's ``margin_weight``. The programme weighs margin intrusions on every frame, the
 #: refinement only at the worst frame and against the peak use, and it leaves most of a
@@ -221,10 +228,11 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     each grid the cheapest path of a second ranking closer to the take's (margins
     :data:`LIGHT_MARGIN` times as heavy, the ends' room as a use), where that is another
     path on most frames. Each runs the continuation's first stage, which settles the
-    basin; the fastest take, as the timing stage measures it, runs the remaining stages
-    (with every start within :data:`CLOSE_STARTS` of it, and the starts that would have
-    gone on without the other arms' and the second ranking's starts: the answer is never
-    slower than theirs), and the fastest answer wins.
+    basin (an arm whose start ends it far behind the fastest, :data:`SLOW_ARM`, starts again
+    from the programme on twice the track values); the fastest take, as the timing stage
+    measures it, runs the remaining stages (with every start within :data:`CLOSE_STARTS` of
+    it, and the starts that would have gone on without the other arms' and the second
+    ranking's starts: the answer is never slower than theirs), and the fastest answer wins.
     ``progress`` is called after each step (a start's programme, a refinement stage) with
     that step's share of the n frames (the shares add up to n).
     """
@@ -256,6 +264,8 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         heavy, lite = _programme(robot, (cost, light_cost), targets, start, frames, n_track,
                                  n_extend, held)
         starts = _one_per_arm(heavy) if i == 0 else heavy[:1]
+        if i == 0:
+            arms = len(starts)  # the first runs: one per arm configuration
         more = [st for st in lite[:1] if not any(_alike(st, o) for o in starts)]
         step()
         for k, (branch, x0, y0, lo1, hi1) in enumerate(starts + more):
@@ -267,6 +277,20 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
             if k == 0:
                 firsts.append(run)
         step()
+    # an arm whose first stage ended far behind the fastest start may only be held back by
+    # the grid: its programme again on twice the track values
+    top = max(r.best[0] for r in runs + light)
+    behind = {int(r.branch[0]) >> 1 for r in runs[:arms] if r.best[0] < SLOW_ARM * top}
+    if behind:
+        (dense,) = _programme(robot, (cost,), targets, start, frames, 2 * s.track_samples,
+                              s.extend_samples, held)
+        for branch, x0, y0, lo1, hi1 in _one_per_arm(dense):
+            if int(branch[0]) >> 1 in behind:
+                run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
+                                 rounds=s.refine_rounds, tolerance=s.refine_tolerance,
+                                 take_speed=take_speed, held=held)
+                run.stage()
+                runs.append(run)
     # the starts within a hundredth of the fastest all go on (a near tie after one stage
     # says little about which basin is better), and so do the grids' own choices that would
     # have gone on without the other arms' starts: the answer is never slower than theirs
