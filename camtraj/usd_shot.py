@@ -377,6 +377,7 @@ def _read(
         prim, path, time_codes, frame_numbers, meters_per_unit, up_axis
     )
     cam2world = _keep_holds(cam2world, _keyed_holds(prim, time_codes))
+    cam2world = _keep_holds(cam2world, _still_runs(cam2world))
 
     cam = UsdGeom.Camera(prim)
     lens = {}
@@ -767,6 +768,34 @@ def _key_value(value: Any) -> NDArray[np.float64]:
     if hasattr(value, "GetImaginary"):
         return np.array([value.GetReal(), *value.GetImaginary()], dtype=float)
     return np.asarray(value, dtype=float).ravel()
+
+
+HOLD_JITTER = 1e-6
+"""[m] and [rad]: a camera within this of a hold's first frame holds (baked float values
+jitter by about 1e-7 around a still pose; a slow creep of 5 mm in 10 s moves 2e-5 m a frame
+at 24 fps)."""
+
+
+def _still_runs(cam2world: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per frame pair (n - 1,), whether the camera holds still: the second frame's pose is
+    within :data:`HOLD_JITTER` of the first frame of the run the pair is in (position, and
+    rotation by the angle between the two orientations). A run is measured from its first
+    frame, not frame to frame, so a creep below the threshold per frame still moves."""
+    n = cam2world.shape[0]
+    held = np.zeros(max(n - 1, 0), dtype=bool)
+    if n < 2:
+        return held
+    pos, rot = cam2world[:, :3, 3], cam2world[:, :3, :3]
+    # |R_a - R_b| (Frobenius) is sqrt(8) sin(angle / 2): sqrt(2) x the angle when small
+    close = ((np.linalg.norm(np.diff(pos, axis=0), axis=1) <= HOLD_JITTER)
+             & (np.linalg.norm(np.diff(rot, axis=0), axis=(1, 2)) <= np.sqrt(2.0) * HOLD_JITTER))
+    first = 0
+    for k in np.flatnonzero(close):  # pair k: frames k and k + 1
+        if k == 0 or not held[k - 1]:
+            first = int(k)  # a run starts with this pair
+        held[k] = (np.linalg.norm(pos[k + 1] - pos[first]) <= HOLD_JITTER
+                   and np.linalg.norm(rot[k + 1] - rot[first]) <= np.sqrt(2.0) * HOLD_JITTER)
+    return held
 
 
 def _keep_holds(cam2world: NDArray[np.float64],

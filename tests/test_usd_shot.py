@@ -664,6 +664,46 @@ def test_keys_that_differ_are_motion_however_small(tmp_path: Path) -> None:
         assert np.abs(shot.cam2world[i] - usd).max() < 1e-12, frame
 
 
+def _baked(tmp_path: Path, name: str, xs: np.ndarray) -> Path:
+    """A camera baked frame by frame in Y-up centimetres: translate x per frame (m)."""
+    stage = _new_stage(tmp_path / name, up_axis="Y", meters_per_unit=0.01,
+                       frames=(1, len(xs)))
+    cam = UsdGeom.Camera.Define(stage, "/World/cam")
+    move = cam.AddTranslateOp()
+    cam.AddRotateXYZOp().Set(Gf.Vec3f(-10.0, 30.0, 0.0))
+    for frame, x in enumerate(xs, start=1):
+        move.Set(Gf.Vec3d(100.0 * x, 150.0, -200.0), frame)
+    return _save(stage)
+
+
+def test_a_baked_hold_with_jitter_is_a_hold_and_a_slow_creep_is_not(tmp_path: Path) -> None:
+    """A hold baked with jitter of a few 1e-7 m (as evaluated and baked float values have) is
+    a hold: every frame of it takes its first frame's pose, within 1e-6 m of USD's own, so
+    the robot holds still and ``--timing optimal`` keeps its length. A creep of 5 mm in 10 s
+    (2e-5 m a frame) is motion: every pose is USD's."""
+    from camtraj.ik import camera_holds
+
+    rng = np.random.default_rng(5)
+    xs = np.concatenate([np.linspace(4.0, 4.5, 12), np.full(30, 4.5), np.linspace(4.5, 5.0, 12)])
+    xs[12:42] += rng.uniform(-3e-7, 3e-7, 30)
+    shot = read_shot(_baked(tmp_path, "jitter.usda", xs))
+    held = camera_holds(shot.cam2world)
+    assert held[11:41].all() and not held[:10].any() and not held[42:].any()
+    assert np.array_equal(shot.cam2world[12:42],
+                          np.broadcast_to(shot.cam2world[11], (30, 4, 4)))
+    assert np.abs(shot.cam2world[12:42, :3, 3] - shot.cam2world[11, :3, 3]).max() == 0.0
+    # Y-up centimetres to Z-up metres keeps x: the read x is the authored one, moved by
+    # less than 1e-6 m in the hold and not at all elsewhere
+    x = shot.cam2world[:, 0, 3]
+    assert np.abs(x - xs).max() < 1e-6
+    assert np.abs(x[:12] - xs[:12]).max() < 1e-12 and np.abs(x[42:] - xs[42:]).max() < 1e-12
+
+    creep = 4.0 + 0.005 * np.arange(240) / 239.0
+    slow = read_shot(_baked(tmp_path, "creep.usda", creep))
+    assert not camera_holds(slow.cam2world).any()
+    assert np.abs(slow.cam2world[:, 0, 3] - creep).max() < 1e-12
+
+
 def camera_holds_any(poses: Array) -> bool:
     from camtraj.ik import camera_holds
 
