@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -201,10 +202,10 @@ def test_dynamic_programme_equals_brute_force(robot: Robot) -> None:
         assert choice.cost == pytest.approx(direct, rel=1e-9)
 
 
-@pytest.mark.parametrize("n", [12, 30, 120])
-def test_refinement_never_slows_the_take(robot: Robot, n: int) -> None:
-    """The refined take is at least as fast as the dynamic programme's, as the timing stage
-    measures it; it moved off the grid; every frame still reaches its pose exactly."""
+def _programme_start(robot: Robot, n: int) -> tuple[Any, ...]:
+    """The programme's answer on a coarse grid for a camera path of n frames at 24 fps, as a
+    refinement's start: targets, cost, the choice, track/extend (n, 2), the track interval
+    (lo, hi) and the timing stage's speed of a joint path."""
     targets = camera_path(robot, n)
     cost = ShotCost.for_robot(robot, 1.0 / 24.0)
     cand = candidates(robot, targets, n_track=2, n_extend=2)
@@ -219,8 +220,15 @@ def test_refinement_never_slows_the_take(robot: Robot, n: int) -> None:
     def speed(q: np.ndarray) -> float:
         return feasible_speed(q, times, limits)
 
-    ref = refine(robot, cost, targets, choice.branch, x0, choice.y,
-                 cand.track_lo[rows, j], cand.track_hi[rows, j], take_speed=speed)
+    return targets, cost, choice, x0, cand.track_lo[rows, j], cand.track_hi[rows, j], speed
+
+
+@pytest.mark.parametrize("n", [12, 30, 120])
+def test_refinement_never_slows_the_take(robot: Robot, n: int) -> None:
+    """The refined take is at least as fast as the dynamic programme's, as the timing stage
+    measures it; it moved off the grid; every frame still reaches its pose exactly."""
+    targets, cost, choice, x0, lo, hi, speed = _programme_start(robot, n)
+    ref = refine(robot, cost, targets, choice.branch, x0, choice.y, lo, hi, take_speed=speed)
     assert speed(ref.y[:, :8]) >= speed(choice.y[:, :8])
     assert np.abs(ref.x - x0).max() > 1e-6  # it moved off the grid
     dp, dr = pose_error(robot.fk(ref.y[:, :8]), targets)
@@ -236,25 +244,11 @@ def test_a_start_with_grid_steps_is_smoothed_before_the_refinement(robot: Robot)
     from camtraj.ik.shot import branch_measures
 
     n = 120
-    targets = camera_path(robot, n)
-    cost = ShotCost.for_robot(robot, 1.0 / 24.0)
-    cand = candidates(robot, targets, n_track=2, n_extend=2)
-    choice = choose(cost, cand, robot.home)
-    assert choice is not None
-    rows = np.arange(n)
-    j = cand.interval[rows, choice.point]
-    lo, hi = cand.track_lo[rows, j], cand.track_hi[rows, j]
-    x0 = np.stack([cand.r1[rows, choice.point], cand.r4[rows, choice.point]], axis=1)
-    x0[:, 0] = np.clip(x0[:, 0] + 0.005 * (-1.0) ** rows, lo, hi)
+    targets, cost, choice, x0, lo, hi, speed = _programme_start(robot, n)
+    x0[:, 0] = np.clip(x0[:, 0] + 0.005 * (-1.0) ** np.arange(n), lo, hi)
     y0, ok = branch_measures(robot, targets, x0[:, 0], x0[:, 1], choice.y[:, :8],
                              choice.branch)
     assert ok.all()
-    limits = Limits.from_robot(robot)
-    times = np.arange(n) / 24.0
-
-    def speed(q: np.ndarray) -> float:
-        return feasible_speed(q, times, limits)
-
     run = Refinement(robot, cost, targets, choice.branch, x0, y0, lo, hi, take_speed=speed)
     assert run.best[0] >= 5.0 * speed(y0[:, :8])
     dp, dr = pose_error(robot.fk(run.y[:, :8]), targets)
