@@ -229,7 +229,7 @@ def analyse(
             # a jump between frames (a cut in the shot, or a flip) smears over the frames
             # around it as the spline's jerk: say where it is
             cuts = camera_cuts(targets, shot.frames)
-            jump = step_warning(robot, analysis.path, shot.frames, 1.0 / shot.fps)
+            jump = step_warning(robot, analysis.path, targets, shot.frames, 1.0 / shot.fps)
             for note in cuts or ([jump] if jump else []):
                 exc.add_note(note)
             raise
@@ -415,26 +415,47 @@ def run_warnings(analysis: Analysis) -> list[str]:
         from camtraj.lens import lens_warnings
 
         warnings += lens_warnings(analysis.robot.lens, shot)
-    flip = step_warning(analysis.robot, path, shot.frames, 1.0 / shot.fps)
+    flip = step_warning(analysis.robot, path, analysis.targets, shot.frames, 1.0 / shot.fps)
     if flip:
         warnings.append(flip)
     return warnings
 
 
-def step_warning(robot: Robot, path: PathSolution, frames: NDArray[np.int_],
+JUMP_OFF_PATH_M = 0.05
+"""A joint step beyond an axis's one-frame reach is a jump (a reconfiguration of the arm)
+where, half-way through it, the camera is this far [m] from the middle of its two frames'
+positions (and more than half the camera's own step off it): the arm swings the camera
+through the set between two frames. Along a smooth joint path that distance is second
+order in the step (under a millimetre for a 15 deg per frame whip pan)."""
+
+
+def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArray[np.int_],
                  dt: float) -> str | None:
     """A warning where the joint path jumps: a frame-to-frame step beyond what an axis can
-    do in one frame at its velocity limit (the papers' per-frame objective: a flip, or a wrap
-    around a limit; any objective: a revolute step of more than a quarter turn). The take
-    then has to slow the whole shot to cover it; the largest such step is named. (A move
-    that is simply faster than an axis, like a whip pan, is the timing stage's to report.)"""
+    do in one frame at its velocity limit that is not the camera's own motion. For the
+    papers' per-frame objective every such step (a flip, or a wrap around a limit); for any
+    objective a revolute step of more than a quarter turn, or a step where the camera at the
+    joints' half-way point leaves the path between its two frames by more than
+    :data:`JUMP_OFF_PATH_M` (the arm reconfigures). The take then has to slow the whole shot
+    to cover it (``--timing optimal`` slows only the frames around it); the largest such
+    step is named. (A move that is simply faster than an axis, like a whip pan, is the
+    timing stage's to report.) ``targets``: the camera poses (n, 4, 4) in the base frame."""
     if path.within_step.all():
         return None
     delta = np.diff(path.q, axis=0)
     steps = np.abs(delta) / (robot.max_velocity * dt)
-    jump = steps > 1.0
-    if path.objective != "paper":
-        jump &= REVOLUTE & (np.abs(delta) > 0.5 * math.pi)
+    over = steps > 1.0
+    off = np.zeros(delta.shape[0])
+    pairs = np.flatnonzero(over.any(axis=1))  # the camera half-way, where an axis is over
+    if pairs.size:
+        half = robot.camera_pose(path.q[pairs] + 0.5 * delta[pairs])[:, :3, 3]
+        ends = targets[:, :3, 3]
+        chord = ends[pairs + 1] - ends[pairs]
+        off[pairs] = np.linalg.norm(half - (ends[pairs] + 0.5 * chord), axis=1)
+        off[pairs] *= off[pairs] > 0.5 * np.linalg.norm(chord, axis=1)
+    swings = off > JUMP_OFF_PATH_M
+    jump = over if path.objective == "paper" else over & (
+        (REVOLUTE & (np.abs(delta) > 0.5 * math.pi)) | swings[:, None])
     if not jump.any():
         return None
     steps = np.where(jump, steps, 0.0)
@@ -443,9 +464,12 @@ def step_warning(robot: Robot, path: PathSolution, frames: NDArray[np.int_],
     size = f"{math.degrees(step):+.1f} deg" if REVOLUTE[j] else f"{step:+.3f} m"
     count = int(jump.any(axis=1).sum())
     which = "" if path.objective == "shot" else f" of the {path.objective} objective"
+    what = (f"the arm reconfigures: half-way the camera is {off[k]:.2f} m off its path"
+            if swings[k] else f"a flip{which}")
     return (f"{count} frame(s) jump: {JOINT_NAMES[j]} moves {size} between frames "
             f"{int(frames[k])} and {int(frames[k + 1])}, {float(steps[k, j]):.1f}x what it can "
-            f"move in one frame (a flip{which}); the take is slowed to cover it")
+            f"move in one frame ({what}); the take is slowed to cover it (--timing optimal "
+            f"slows only the frames around it)")
 
 
 def summary(

@@ -604,6 +604,68 @@ def test_summary_matches_the_shot(runs: dict[str, Run], key: str) -> None:
     assert summary["shot_end"] == pytest.approx(take.frame_times[-1], abs=1e-9)
 
 
+def test_an_arm_reconfiguring_between_two_frames_is_named_and_a_fast_move_is_not() -> None:
+    """Half-way through the shot the arm switches to another solution of the same poses (the
+    track 0.8 m further, every other axis re-solved on the same branch): each frame is
+    reached, but between two frames the arm swings the camera off its path, which
+    ``step_warning`` names (axis, frames, step, how far off, and that optimal timing slows
+    only around it); the smooth path before the switch and the whip pan's fast steps (beyond
+    the pan's one-frame reach, the camera on its path) are not called jumps."""
+    from dataclasses import replace
+
+    from camtraj.convert import step_warning
+    from camtraj.ik import solve_path_report
+    from camtraj.ik.shot import branch_measures
+    from camtraj.usd_shot import read_shot
+
+    robot = Robot.default()
+    shot = read_shot(SHOTS / "maya_dolly_push_in.usda")
+    dt = 1.0 / shot.fps
+    flange = shot.cam2world @ np.linalg.inv(robot.camera2flange)
+    path = replace(solve_path_report(robot, flange, objective="paper", frame_interval=dt),
+                   objective="shot")
+    q, n = path.q, path.q.shape[0]
+    assert step_warning(robot, path, shot.cam2world, shot.frames, dt) is None
+    k = n // 2
+    tail = slice(k, n)
+    for b in range(8):  # the branch the solver's frames are on
+        branch = np.full(n - k, b)
+        y, ok = branch_measures(robot, flange[tail], q[tail, 0], q[tail, 3], q[tail], branch)
+        if ok.all() and np.allclose(y[:, :8], q[tail], atol=1e-9):
+            break
+    else:
+        pytest.fail("no branch reproduces the solver's frames")
+    for shift in (0.8, -0.8):
+        y, ok = branch_measures(robot, flange[tail], q[tail, 0] + shift, q[tail, 3], q[tail],
+                                branch)
+        if ok.all():
+            break
+    else:
+        pytest.fail("no other track value reaches the second half")
+    switched = np.concatenate([q[:k], y[:, :8]])
+    assert pose_error(robot.fk(switched), flange)[0] < 1e-9  # every frame still reached
+    within = np.concatenate([[True], (np.abs(np.diff(switched, axis=0))
+                                      <= robot.max_velocity * dt).all(axis=1)])
+    warning = step_warning(robot, replace(path, q=switched, within_step=within),
+                           shot.cam2world, shot.frames, dt)
+    assert warning is not None
+    step = switched[k] - switched[k - 1]  # the axis named: the largest step for its reach
+    j = int(np.argmax(np.abs(step) / (robot.max_velocity * dt)))
+    size = (f"{math.degrees(step[j]):+.1f} deg" if JOINT_NAMES[j] not in ("track", "extend")
+            else f"{step[j]:+.3f} m")
+    assert (f"{JOINT_NAMES[j]} moves {size} between frames {shot.frames[k - 1]} and "
+            f"{shot.frames[k]}") in warning, warning
+    off = float(re.search(r"the camera is ([0-9.]+) m off its path", warning).group(1))
+    assert off > 0.05, warning
+    assert "--timing optimal slows only the frames around it" in warning
+    whip = read_shot(SHOTS / "whip_pan.usda")
+    whip_dt = 1.0 / whip.fps
+    fast = solve_path_report(robot, whip.cam2world @ np.linalg.inv(robot.camera2flange),
+                             frame_interval=whip_dt)
+    assert not fast.within_step.all()  # steps beyond an axis's one-frame reach
+    assert step_warning(robot, fast, whip.cam2world, whip.frames, whip_dt) is None
+
+
 def test_a_jump_between_frames_is_named_with_its_axis_frames_and_size() -> None:
     """The papers' per-frame objective swings the wrist half a turn between two frames of the
     crane-up (its pan wraps round): check says so, with the axis, the frames and the step,
