@@ -233,11 +233,28 @@ def test_shot_velocity_violation_names_axis_frames_and_speed(limits: Limits) -> 
     assert "--timing scale" in msg
     assert err.max_speed == pytest.approx(1 / k, rel=1e-5)
     assert err.feasible_fps == pytest.approx(FPS / k, rel=1e-5)
+
     (viol,) = err.violations
     assert (viol.axis, viol.quantity) == ("rotate", "velocity")
     assert viol.frames == ((first, last),)
     assert viol.ratio == pytest.approx(k, rel=1e-6)
     assert viol.peak == pytest.approx(k * vmax, rel=1e-6)
+
+
+def test_a_violation_just_over_a_limit_says_by_how_much(limits: Limits) -> None:
+    """The same bump 0.02% over the rotate velocity: rounded for display, the peak and the limit
+    both read 90.0 deg/s, so the line says by how much the limit is exceeded; 1.6x over keeps
+    its plain form."""
+    vmax = float(limits.velocity[ROTATE])
+    for k, expected in ((1.0002, "exceeds 90.0 deg/s by 0.02% on frames"),
+                        (1.6, "rotate velocity 144 deg/s exceeds 90.0 deg/s on frames")):
+        t, q = bump_path(121, k, vmax, 1.0, 3.0)
+        with pytest.raises(TimingLimitError) as info:
+            time_shot(q, t, limits, frame_numbers=np.arange(1001, 1122))
+        line = info.value.violations[0].describe()
+        assert expected in line, line
+        if k > 1.5:
+            assert " by " not in line
 
 
 def test_position_limit_raises_in_every_mode(limits: Limits) -> None:

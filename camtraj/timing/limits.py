@@ -163,7 +163,9 @@ class LimitViolation:
             )
         lim = fmt(self.limit, self.quantity, self.revolute)
         peak = fmt(abs(self.peak), self.quantity, self.revolute)
-        return f"{self.axis} {self.quantity} {peak} exceeds {lim} on {self.frame_text}"
+        # "1.5 m/s^2 exceeds 1.5 m/s^2" reads as no violation: say by how much
+        by = f" by {(self.ratio - 1.0) * 100.0:.2g}%" if peak == lim else ""
+        return f"{self.axis} {self.quantity} {peak} exceeds {lim}{by} on {self.frame_text}"
 
 
 class TimingLimitError(LimitError):
