@@ -23,7 +23,6 @@ import click
 
 import camtraj
 from camtraj import interrupts, jsonsafe
-from camtraj.batch import batch_command
 from camtraj.errors import (
     CamtrajError,
     CollisionError,
@@ -96,10 +95,15 @@ class _Main(click.Group):
     """The ``camtraj`` group: a stop by signal or a failing standard output is one line.
 
     Commands in :attr:`LAZY` are imported only when they run (or ``--help`` lists them), so
-    ``convert`` does not pay for the placement search's imports.
+    ``convert`` does not pay for the placement search's imports, nor for the batch and farm
+    commands' (their process pools, logging and job-file code).
     """
 
-    LAZY: ClassVar[dict[str, tuple[str, str]]] = {"place": ("camtraj.place", "place_command")}
+    LAZY: ClassVar[dict[str, tuple[str, str]]] = {
+        "place": ("camtraj.place", "place_command"),
+        "batch": ("camtraj.batch", "batch_command"),
+        "farm": ("camtraj.farm", "farm_group"),
+    }
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted({*super().list_commands(ctx), *self.LAZY})
@@ -402,15 +406,6 @@ def report_command(mcap_file: str, output: str) -> None:
         report_mcap(mcap_file, output)
     except CamtrajError as exc:
         _fail(exc)
-
-
-main.add_command(batch_command, "batch")
-try:  # the farm commands need nothing optional until they run
-    from camtraj.farm import farm_group
-
-    main.add_command(farm_group, "farm")
-except ImportError:  # pragma: no cover - farm.py is part of the package
-    pass
 
 
 # ---------------------------------------------------------------------------------------------
