@@ -39,7 +39,6 @@ referenced set file) are trapped and passed to this module's logger instead of s
 from __future__ import annotations
 
 import contextlib
-import itertools
 import logging
 import math
 import numbers
@@ -751,8 +750,7 @@ def _keyed_holds(prim: Any, time_codes: NDArray[np.float64]) -> NDArray[np.bool_
             times = np.asarray(attr.GetTimeSamples(), dtype=float)
             if times.size < 2:
                 continue  # a constant
-            values = [_key_value(attr.Get(Usd.TimeCode(float(t)))) for t in times]
-            changed = [not np.array_equal(v, w) for v, w in itertools.pairwise(values)]
+            changed = _key_changes(attr, times)
             run = np.concatenate([[0], np.cumsum(changed)])  # equal keys in a row: one run
             lo = np.clip(np.searchsorted(times, a, side="right") - 1, 0, times.size - 1)
             hi = np.clip(np.searchsorted(times, b, side="left"), 0, times.size - 1)
@@ -761,6 +759,17 @@ def _keyed_holds(prim: Any, time_codes: NDArray[np.float64]) -> NDArray[np.bool_
                 break
         p = p.GetParent()
     return held
+
+
+def _key_changes(attr: Any, times: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per pair of consecutive time samples (k - 1,), whether the op's value changes: keys
+    compared as arrays, all pairs at once (a blocked key, read as one NaN, equals nothing)."""
+    query = Usd.AttributeQuery(attr)  # resolved once, not per key
+    keys = [_key_value(query.Get(t)) for t in times.tolist()]
+    width = max(key.size for key in keys)
+    rows = np.array([key if key.size == width else np.full(width, np.nan) for key in keys])
+    changed: NDArray[np.bool_] = np.any(rows[1:] != rows[:-1], axis=1)
+    return changed
 
 
 def _key_value(value: Any) -> NDArray[np.float64]:
@@ -812,13 +821,18 @@ def _keep_holds(cam2world: NDArray[np.float64],
 def _sample_attribute(
     attr: Any, time_codes: NDArray[np.float64], width: int = 0
 ) -> NDArray[np.float64]:
-    """(n,) values of a scalar attribute, or (n, width) of a vector one; NaN where unset."""
+    """(n,) values of a scalar attribute, or (n, width) of a vector one; NaN where unset.
+
+    An attribute that cannot vary (at most one time sample, no spline) is read once: most
+    of a camera's are constant, and a query per frame of each took most of the read."""
     query = Usd.AttributeQuery(attr)
     values = np.full((len(time_codes), width) if width else len(time_codes), np.nan)
-    for i, tc in enumerate(time_codes):
-        value = query.Get(Usd.TimeCode(float(tc)))
+    read = time_codes if query.ValueMightBeTimeVarying() else time_codes[:1]
+    for i, tc in enumerate(read.tolist()):
+        value = query.Get(tc)
         if value is not None:
             values[i] = value
+    values[len(read):] = values[:1]  # the frames not read: the one value
     return values
 
 
