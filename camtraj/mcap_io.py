@@ -341,13 +341,11 @@ def _encode_trajectory(
     head.u32(len(ns))
     # A point's layout depends only on where it starts modulo 8: one template per phase.
     templates: dict[int, _Cdr] = {}
-    starts = np.empty(len(ns), dtype=np.int64)
-    phases = np.empty(len(ns), dtype=np.uint8)
+    phase_list: list[int] = []
     pos = head.position
-    for i in range(len(ns)):
+    for _ in range(len(ns)):
         phase = pos % 8
-        tpl = templates.get(phase)
-        if tpl is None:
+        if phase not in templates:
             tpl = _Cdr(header=False, phase=phase)
             tpl.slot_f64s("positions", len(names))
             tpl.slot_f64s("velocities", len(names))
@@ -355,17 +353,15 @@ def _encode_trajectory(
             tpl.u32(0)  # effort: empty
             tpl.slot_time("time_from_start")
             templates[phase] = tpl
-        starts[i] = pos
-        phases[i] = phase
-        pos += len(tpl.buf)
-    message = bytearray(len(head.buf) + pos - head.position)
-    message[: len(head.buf)] = head.buf
-    body = np.frombuffer(message, dtype=np.uint8)
-    starts += len(head.buf) - head.position
+        phase_list.append(phase)
+        pos += len(templates[phase].buf)
+    phases = np.array(phase_list)
+    message = [bytes(head.buf)]  # the head, then each window's points
     # A window of points at a time: the scratch arrays stay small whatever the take's length.
     for a in range(0, len(ns), _WINDOW):
         b = min(a + _WINDOW, len(ns))
         sec, nanosec = np.divmod(ns[a:b], _NS)
+        points: list[bytes] = [b""] * (b - a)
         for phase, tpl in templates.items():
             idx = np.flatnonzero(phases[a:b] == phase)
             if not idx.size:  # no point of this window starts at this phase
@@ -380,9 +376,10 @@ def _encode_trajectory(
                 },
                 len(idx),
             )
-            body[starts[a + idx][:, None] + np.arange(rows.shape[1])] = rows
-    del body
-    return bytes(message)
+            for i, point in zip(idx.tolist(), _split_rows(rows), strict=True):
+                points[i] = point
+        message.append(b"".join(points))
+    return b"".join(message)
 
 
 def _encode_tf(
@@ -903,8 +900,9 @@ def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, byt
         if b > a:
             moving = link_transforms(robot, interpolate_servo(take.t, take.q, take.qd,
                                                               times[a:b])[:, :nj])
+            poses = pose7_from_matrix(np.stack([m.child2parent for m in moving]))  # all links
             parts.append((tf_ns[a:b], rank[TOPIC_TF], a, _encode_tf(
-                tf_frames, tf_ns[a:b], [pose7_from_matrix(m.child2parent) for m in moving])))
+                tf_frames, tf_ns[a:b], list(poses))))
         a, b = frame_cuts[w], frame_cuts[w + 1]
         if b > a:
             parts.append((frame_ns[a:b], rank[TOPIC_CAMERA_INFO], a,
@@ -918,8 +916,10 @@ def _messages(take: TakeData, robot: Robot) -> Iterator[tuple[int, int, int, byt
         seqs = np.concatenate([np.arange(p[2], p[2] + len(p[3])) for p in parts])
         data = [d for p in parts for d in p[3]]
         del parts
-        for i in np.lexsort((seqs, ranks, log)).tolist():
-            yield int(log[i]), int(ranks[i]), int(seqs[i]), data[i]
+        order = np.lexsort((seqs, ranks, log))
+        # as lists: Python ints, without a numpy scalar per message and field
+        yield from zip(log[order].tolist(), ranks[order].tolist(), seqs[order].tolist(),
+                       [data[i] for i in order.tolist()], strict=True)
 
 
 # ---------------------------------------------------------------------------------------------
