@@ -7,6 +7,9 @@
 #   EXCLUDE   = NAME ...       shot names (file names without extension) to leave out
 #   CAMTRAJ   = camtraj        the camtraj command
 #   ROBOT     = robot.toml     robot description (outputs also depend on this file)
+#   SET_FILE  = set.toml       set file: the track's layout on set, obstacles (`camtraj place`
+#                              writes one; outputs also depend on this file)
+#   LENS      = lens.toml      lens file: zoom, focus and iris motors (outputs also depend on it)
 #   PLACEMENT = x,y,z,yaw_deg  stage-to-robot placement
 #   TIMING    = shot           shot | scale | optimal
 #   RATE      = 250            servo rate [Hz] (empty: camtraj's default)
@@ -18,8 +21,8 @@
 # camtraj-all, camtraj-check, camtraj-clean for Makefiles that have their own all/check/clean
 # recipes (set CAMTRAJ_NO_DEFAULT_TARGETS = 1 to leave all/check/clean alone).
 #
-# Incremental: OUT/NAME.mcap is remade when the shot, the robot file or the convert options
-# change; use `make -k -jN` to convert in parallel and go on past shots that fail. A failed
+# Incremental: OUT/NAME.mcap is remade when the shot, the robot, set or lens file or the convert
+# options change (a file passed in CAMTRAJ_FLAGS is not watched: use the variables); use `make -k -jN` to convert in parallel and go on past shots that fail. A failed
 # shot leaves neither NAME.mcap (camtraj writes atomically) nor a stale NAME.summary.json.
 # Shot file names must not contain spaces (a make limitation: use `camtraj batch` for those).
 
@@ -28,6 +31,8 @@ SHOTS_DIR     ?= shots
 OUT           ?= out
 EXCLUDE       ?=
 ROBOT         ?=
+SET_FILE      ?=
+LENS          ?=
 PLACEMENT     ?=
 TIMING        ?= shot
 RATE          ?=
@@ -46,11 +51,16 @@ CAMTRAJ_CHECKS := $(CAMTRAJ_NAMES:%=camtraj-check/%)
 CAMTRAJ_OPTIONS := $(strip \
   $(if $(CAMERA),--camera $(CAMERA)) \
   $(if $(ROBOT),--robot $(ROBOT)) \
+  $(if $(SET_FILE),--set-file $(SET_FILE)) \
+  $(if $(LENS),--lens $(LENS)) \
   $(if $(PLACEMENT),--placement $(PLACEMENT)) \
   $(if $(FRAMES),--frames $(FRAMES)) \
   $(if $(RATE),--rate $(RATE)) \
   $(if $(TIMING),--timing $(TIMING)) \
   $(CAMTRAJ_FLAGS))
+
+# The files every conversion reads besides its shot: a change to one remakes every MCAP.
+CAMTRAJ_FILES := $(ROBOT) $(SET_FILE) $(LENS)
 
 # The options used last are kept in OUT/.camtraj-options; it is rewritten (at parse time, so
 # `make -q` still answers correctly) only when they change, and every MCAP depends on it.
@@ -98,13 +108,13 @@ define camtraj-convert
 	  || { rm -f $@ $(@:.mcap=.summary.json); exit 1; }
 endef
 
-$(OUT)/%.mcap: $(SHOTS_DIR)/%.usda $(ROBOT) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
+$(OUT)/%.mcap: $(SHOTS_DIR)/%.usda $(CAMTRAJ_FILES) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
 	$(camtraj-convert)
-$(OUT)/%.mcap: $(SHOTS_DIR)/%.usd $(ROBOT) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
+$(OUT)/%.mcap: $(SHOTS_DIR)/%.usd $(CAMTRAJ_FILES) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
 	$(camtraj-convert)
-$(OUT)/%.mcap: $(SHOTS_DIR)/%.usdc $(ROBOT) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
+$(OUT)/%.mcap: $(SHOTS_DIR)/%.usdc $(CAMTRAJ_FILES) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
 	$(camtraj-convert)
-$(OUT)/%.mcap: $(SHOTS_DIR)/%.usdz $(ROBOT) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
+$(OUT)/%.mcap: $(SHOTS_DIR)/%.usdz $(CAMTRAJ_FILES) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
 	$(camtraj-convert)
 
 # `make check`: analysis only, no output files; -k goes on past failing shots.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -107,3 +108,31 @@ def test_changed_options_make_outputs_out_of_date(built: Path) -> None:
     # Last in the module: it records the new options in OUT/.camtraj-options.
     assert _make(built, "-q").returncode == 0
     assert _make(built, "-q", RATE="200").returncode == 1
+
+
+def test_a_changed_set_or_lens_file_remakes_the_moves(tmp_path: Path) -> None:
+    """SET_FILE and LENS are passed to convert and are prerequisites of every MCAP: the track
+    re-laid in the set file (as `camtraj place` rewrites it) or a lens file recalibrated in
+    place reconverts, with the new placement in the summary."""
+    (tmp_path / "shots").mkdir()
+    shutil.copy2(SAMPLES / "blender_crane_up.usda", tmp_path / "shots")
+    set_file, lens = tmp_path / "set.toml", tmp_path / "lens.toml"
+    set_file.write_text("[placement]\nx = 0.0\ny = 0.0\nz = 0.0\nyaw_deg = 0.0\n")
+    shutil.copy2(ROOT / "camtraj" / "data" / "lenses" / "prime_50.toml", lens)
+    files = {"SET_FILE": str(set_file), "LENS": str(lens), "EXCLUDE": ""}
+    _make(tmp_path, check=True, **files)
+    out = tmp_path / "out"
+    assert _make(tmp_path, "-q", **files).returncode == 0
+    for changed in (set_file, lens):
+        for p in out.iterdir():  # older than any change below, at any mtime resolution
+            os.utime(p, ns=(p.stat().st_atime_ns, p.stat().st_mtime_ns - 10**10))
+        if changed == set_file:
+            changed.write_text("[placement]\nx = 0.2\ny = -0.1\nz = 0.0\nyaw_deg = 3.0\n")
+        else:
+            changed.touch()
+        assert _make(tmp_path, "-q", **files).returncode == 1, changed
+        proc = _make(tmp_path, check=True, **files)
+        assert proc.stdout.count(" convert ") == 1, proc.stdout
+    summary = json.loads((out / "blender_crane_up.summary.json").read_text())
+    assert summary["placement"]["source"] == str(set_file)
+    assert summary["placement"]["translation_m"] == [0.2, -0.1, 0.0]
