@@ -60,6 +60,10 @@ MAX_MOTOR = 1.0e6
 RANGE_RTOL = 1e-6
 """A lens quantity this close (relative) to the end of the calibrated range is inside it
 (USD keeps focal lengths, focus distances and stops as 32-bit floats: f/2.8 reads 2.7999999)."""
+PRIME_RTOL = 1e-3
+"""A shot's focal length this close (relative) to a prime's is the prime's: 0.05 mm on a 50 mm,
+far below what a lens is marked to (a zoom easing away from 32 mm read as off a 32 mm prime at
+32.00005 mm)."""
 BISECTIONS = 80
 """Bisection steps of the inverse map: enough to reach the last bit of any double."""
 
@@ -264,11 +268,16 @@ def shot_quantity(shot: Shot, axis: str) -> Array:
 
 
 def _show(axis: str, x: float, unit: str = "") -> str:
+    """A lens quantity for people: a stop as T or f/, a focal length in mm, a focus distance
+    in m and, for a lens file written in another unit, in that unit too (12 m (39.37 ft))."""
     if axis == "iris":
         return f"{'T' if unit == 'T-stop' else 'f/'}{x:.3g}"
     if not math.isfinite(x):
         return "infinity"
-    return f"{x:.4g} mm" if axis == "zoom" else f"{x:.4g} m"
+    if axis == "zoom":
+        return f"{x:.4g} mm"
+    factor = UNITS["focus"].get(unit, 1.0)
+    return f"{x:.4g} m" + (f" ({x / factor:.4g} {unit})" if factor != 1.0 else "")
 
 
 def lens_positions(lens: Lens, shot: Shot) -> Array:
@@ -332,7 +341,7 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
     out = []
     if lens.axis("zoom") is None and lens.focal_length_mm is not None:
         fl = shot.focal_length_mm
-        off = np.abs(fl - lens.focal_length_mm) > RANGE_RTOL * lens.focal_length_mm
+        off = np.abs(fl - lens.focal_length_mm) > PRIME_RTOL * lens.focal_length_mm
         if off.any():
             span = (f"{float(fl.min()):.4g} mm" if float(np.ptp(fl)) == 0.0 else
                     f"{float(fl.min()):.4g}-{float(fl.max()):.4g} mm")

@@ -268,3 +268,20 @@ def test_a_focus_table_in_feet(tmp_path: Path) -> None:
     assert np.abs(got - np.radians(motor[: len(finite)])).max() < 1e-12
     assert Lens.from_toml(path).describe()["axes"]["focus"]["quantity_unit"] == "m"
     assert Lens.from_toml(path).describe()["axes"]["focus"]["file_unit"] == "ft"
+    # a distance beyond the table is said in metres and in the file's feet
+    near = min(finite) * 0.3048  # the nearest mark, in metres
+    with pytest.raises(LensRangeError) as info:
+        lens_positions(Lens.from_toml(path), _shot([30.0, 30.0], [2.0, 0.5 * near],
+                                                  [4.0, 4.0]))
+    assert (f"focus distance {0.5 * near:.4g} m ({0.5 * min(finite):.4g} ft) at frame 102 is "
+            f"nearer than the lens's {near:.4g} m ({min(finite):.4g} ft)") in str(info.value)
+
+
+def test_a_prime_is_not_missed_by_a_rounding_step() -> None:
+    """A zoom easing away from the prime's focal length: the warning names the first frame
+    off by more than a thousandth (0.05 mm on the 50 mm prime), not the first that differs
+    in the 6th digit."""
+    focal = [50.0, 50.00004, 50.02, 50.2, 52.0]
+    warnings = lens_warnings(Lens.from_toml(PRIME), _shot(focal, [2.0] * 5, [2.8] * 5))
+    assert any("first at frame 104" in w and "50 mm prime" in w for w in warnings), warnings
+    assert lens_warnings(Lens.from_toml(PRIME), _shot([50.0, 50.04], [2.0] * 2, [2.8] * 2)) == []
