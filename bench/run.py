@@ -15,6 +15,9 @@ comes with a ratio against a baseline measured in the same run:
    writer's peak memory per film frame (tracemalloc), and the
    ``camtraj convert`` command in a new process (start-up and imports included). 3b:
    convert's peak memory per film frame in each stage (tracemalloc) on a 10,000-frame shot.
+   3c: ``--timing optimal`` against ``--timing scale`` (the shot's own timing where it fits)
+   on the same joint paths (the samples; the one-minute shot too in a full run): the timing
+   stage's CPU and the takes' lengths.
 4. ``camtraj batch`` (``bench/bench_batch.py``, owned separately).
 5. Maximum feasible speed (the timing stage's ``max_speed``) per shot of issue 13's shot set
    (``tests/shot_set.py``): the default objective vs ``paper`` vs the default at 10x effort vs
@@ -609,6 +612,44 @@ def print_convert_memory(mem: dict[str, Any]) -> None:
     )
 
 
+def bench_optimal(robot: Robot, shots: dict[str, Path]) -> list[dict[str, Any]]:
+    """Table 3c: per shot, the timing stage (``time_shot``) with ``optimal`` and with ``scale``
+    timing (the shot's own where it fits) on the default objective's joint path: CPU [s], one
+    call each, and the take's length [s]."""
+    from camtraj.ik import camera_holds, solve_path
+    from camtraj.timing import Limits, time_shot
+
+    limits = Limits.from_robot(robot)
+    rows = []
+    for name, path in shots.items():
+        log(f"table 3c: --timing optimal on {name}")
+        shot = read_shot(path)
+        q = solve_path(robot, shot.cam2world @ np.linalg.inv(robot.camera2flange),
+                       frame_interval=1.0 / shot.fps)
+        hold = camera_holds(shot.cam2world)
+        row: dict[str, Any] = {"shot": name, "frames": int(q.shape[0])}
+        for mode in ("scale", "optimal"):
+            t0 = time.process_time()
+            take = time_shot(q, shot.times, limits, mode=mode, frame_numbers=shot.frames,
+                             hold=hold)
+            row[f"{mode}_cpu_s"] = time.process_time() - t0
+            row[f"{mode}_take_s"] = float(take.t[-1])
+        rows.append(row)
+    return rows
+
+
+def print_optimal(rows: list[dict[str, Any]]) -> None:
+    table(
+        "3c. --timing optimal against --timing scale on the same joint path (the timing stage "
+        "alone, one call each, CPU)",
+        ["shot", "frames", "scale: take [s]", "optimal: take [s]", "scale: CPU [s]",
+         "optimal: CPU [s]", "optimal CPU / frame [ms]"],
+        [[r["shot"], str(r["frames"]), fmt(r["scale_take_s"]), fmt(r["optimal_take_s"]),
+          fmt(r["scale_cpu_s"]), fmt(r["optimal_cpu_s"]),
+          fmt(1e3 * r["optimal_cpu_s"] / r["frames"])] for r in rows],
+    )
+
+
 def print_convert(res: dict[str, Any], shot_seconds: float, bare_ik_s: float) -> None:
     if "skipped" in res:
         print(f"\n3. End-to-end convert: skipped: {res['skipped']}")
@@ -1147,6 +1188,14 @@ def main(argv: list[str] | None = None) -> int:
         mem = convert_memory(work, 2000 if quick else 10_000)
         results["convert_memory"] = mem
         print_convert_memory(mem)
+
+        samples = ROOT / "samples" / "shots"
+        optimal_shots = {n: samples / f"{n}.usda"
+                         for n in ("blender_crane_up", "maya_dolly_push_in", "whip_pan")}
+        if not quick:
+            optimal_shots["one-minute shot"] = shot
+        results["optimal"] = bench_optimal(robot, optimal_shots)
+        print_optimal(results["optimal"])
 
         speeds = bench_speeds(robot, args.base_rev, work, quick)
         results["speeds"] = speeds
