@@ -16,11 +16,8 @@ Outputs, for a shot ``path/to/NAME.usda``:
 
 A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
 set file, and whose summary records the same convert options, is skipped (make-style) unless
-``--force``. A shot that fails writes nothing, and its MCAP and summary from an earlier run
-are removed, as ``make`` removes the target of a failed rule: a take of an earlier version of
-the shot must not pass for this one's (``batch_report.json`` lists them under ``removed``).
-Only files the summary names as this shot's result go (a file camtraj did not write there
-stays, and so does a rig layer); a shot stopped by a signal keeps them.
+``--force``. A shot that fails writes nothing and removes nothing (as ``convert``): an
+earlier result of it stays, and ``batch_report.json`` says that the shot failed this time.
 
 Exit codes (design.md §5): 0 when every shot converted or was skipped; 2 when any failed shot
 was bad input (or the batch itself was: duplicate output names, bad options); 3 when every
@@ -41,7 +38,7 @@ import signal
 import sys
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -185,8 +182,6 @@ class ShotResult:
         seconds: Conversion wall time in [s] (0 when skipped).
         cpu_seconds: CPU time of the conversion in [s] (0 when skipped).
         summary: The convert summary (read back from the summary file when skipped).
-        removed: The outputs of an earlier run that the batch removed because the shot
-            failed this time.
     """
 
     shot: str
@@ -199,7 +194,6 @@ class ShotResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
-    removed: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """This result as a JSON-able dict."""
@@ -216,7 +210,6 @@ class ShotResult:
             "duration": self.summary.get("duration"),
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
-            "removed": list(self.removed),
         }
 
 
@@ -494,20 +487,6 @@ def _read_summary(path: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
-def _earlier_result(shot: str, mcap: Path, summary: Path) -> list[Path]:
-    """The MCAP and summary an earlier run wrote for this shot in the output folder, known by
-    the summary: a converted shot's, naming this shot and this MCAP. A file camtraj did not
-    write there is never removed, nor is a rig layer (the summary does not name it)."""
-    previous = _read_summary(summary)
-    named = previous.get("shot"), previous.get("output")
-    if previous.get("status") != "ok" or not all(isinstance(p, str) for p in named):
-        return []
-    if (os.path.realpath(str(named[0])), os.path.realpath(str(named[1]))) != (
-            os.path.realpath(shot), os.path.realpath(mcap)):
-        return []
-    return [p for p in (mcap, summary) if p.is_file()]
-
-
 def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any]]) -> ShotResult:
     try:
         outcome = future.result()
@@ -679,20 +658,6 @@ def run_batch(
                 signum = exc.signum if isinstance(exc, interrupts.Interrupted) else signal.SIGINT
                 _stop_workers(pool, stop, signum)
                 raise
-
-    # A failed shot (not a stopped one) loses its earlier result, all in one commit.
-    stale = {i: _earlier_result(r.shot, *names[i]) for i, r in enumerate(results)
-             if r is not None and r.status == "failed" and r.error != "Interrupted"}
-    if any(stale.values()):
-        with OutputSet() as earlier:
-            for paths in stale.values():
-                for p in paths:
-                    earlier.remove(p, "the earlier output")
-            earlier.commit()
-        for i, paths in stale.items():
-            failed = results[i]
-            if paths and failed is not None:
-                results[i] = replace(failed, removed=tuple(map(str, paths)))
 
     report = BatchReport(
         outdir=str(out),

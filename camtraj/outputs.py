@@ -21,10 +21,7 @@ exist is then linked into place directly (``linkat``): it never has another name
 replacing a file needs a name to be renamed over it: it gets ``.NAME.camtraj-tmp-HOST-PID``,
 the file it replaces is kept as ``.NAME.camtraj-old-HOST-PID``, and the renames follow one
 after the other; if one fails the destinations already replaced get their earlier content
-back. So either every output is replaced or none is. An output registered with
-:meth:`OutputSet.remove` (an earlier result a failed run must not leave behind) is removed in
-the same commit, its content kept under the ``-old-`` name until every other output is in
-place. Signals (SIGINT, SIGTERM) are held off
+back. So either every output is replaced or none is. Signals (SIGINT, SIGTERM) are held off
 during the commit: a stop requested before it means nothing is written; once it has started
 the run completes.
 
@@ -160,7 +157,6 @@ class _Output:
     fd: int = -1  # the temporary file
     named: Path | None = None  # its name, when it has one
     written: bool = False
-    removed: bool = False  # to be removed by the commit, not written
 
     @property
     def what(self) -> str:
@@ -205,20 +201,6 @@ class OutputSet:
                 raise InputError(msg)
         remove_stale_temps(out.target.parent, out.target.name)
         self._open_temp(out)
-        self._outputs.append(out)
-
-    def remove(self, path: str | os.PathLike[str], label: str = "") -> None:
-        """Register a destination that the commit removes (if it is there then): an earlier
-        result that must not outlive a failed run. Checked as :meth:`add` checks an output
-        (a regular file or nothing, not another output, not an input once
-        :meth:`refuse_inputs` is called); removed all or nothing with the other outputs."""
-        given = os.fsdecode(path)
-        out = _Output(given, label, Path(os.path.realpath(given)), written=True, removed=True)
-        self._check_destination(out)
-        for other in self._outputs:
-            if self._same_destination(other, out):
-                msg = f"cannot remove {out.what}: it is the same file as {other.what}"
-                raise InputError(msg)
         self._outputs.append(out)
 
     def refuse_inputs(self, inputs: Iterable[tuple[str | os.PathLike[str], str]]) -> None:
@@ -357,8 +339,7 @@ class OutputSet:
     def _commit(self) -> None:
         for out in self._outputs:
             try:
-                if not out.removed:
-                    os.fsync(out.fd)
+                os.fsync(out.fd)
             except OSError as exc:
                 msg = f"cannot write {out.what}: {_reason(exc)}"
                 raise InputError(msg) from None
@@ -367,9 +348,9 @@ class OutputSet:
         # never has another name. Every other output gets a temporary name, renamed over its
         # destination (whose earlier content is kept under a second name until the end).
         direct = {id(o) for o in self._outputs
-                  if o.named is None and not o.removed and not os.path.lexists(o.target)}
+                  if o.named is None and not os.path.lexists(o.target)}
         for out in self._outputs:
-            if out.named is None and not out.removed and id(out) not in direct:
+            if out.named is None and id(out) not in direct:
                 self._link(out, out.target.parent / temp_name(out.target.name))
         backups: list[tuple[_Output, Path | None]] = []
         try:
@@ -378,10 +359,7 @@ class OutputSet:
             done: list[tuple[_Output, Path | None]] = []
             for out, backup in backups:
                 try:
-                    if out.removed:  # its earlier content stays in the backup until the end
-                        with contextlib.suppress(FileNotFoundError):
-                            out.target.unlink()
-                    elif id(out) in direct:
+                    if id(out) in direct:
                         self._link(out, out.target)
                     else:
                         assert out.named is not None
@@ -448,8 +426,7 @@ class OutputSet:
         for out, backup in reversed(done):
             with contextlib.suppress(OSError):
                 if backup is None:
-                    if not out.removed:  # a removed output that was not there stays so
-                        out.target.unlink()
+                    out.target.unlink()
                 else:
                     os.replace(backup, out.target)
 

@@ -169,36 +169,6 @@ def test_touched_shot_robot_file_and_force_reconvert(tmp_path: Path) -> None:
         assert statuses() == ["ok"], path
 
 
-def test_a_shot_that_fails_now_loses_its_earlier_take(tmp_path: Path) -> None:
-    """A shot converted once, then re-exported as a move the robot cannot reach: the batch
-    fails it and removes its earlier MCAP and summary (listed in the report), so a take of
-    the old move cannot pass for the new one's; the other shot's outputs stay."""
-    shots = tmp_path / "shots"
-    shots.mkdir()
-    moved, kept = shots / "sh010.usda", shots / "sh020.usda"
-    for shot in (moved, kept):
-        shutil.copy2(SAMPLES / "maya_dolly_push_in.usda", shot)
-    options = build_options(
-        camera=None, robot=None, placement=None, frames=None, rate=250.0, timing="shot"
-    )
-    out = tmp_path / "out"
-    assert run_batch([str(moved), str(kept)], out, jobs=1, options=options).exit_code == 0
-    earlier = {p.name: p.read_bytes() for p in out.iterdir() if p.name != REPORT_NAME}
-    assert sorted(earlier) == ["sh010.mcap", "sh010.summary.json", "sh020.mcap",
-                               "sh020.summary.json"]
-    shutil.copy2(SAMPLES / "unreachable.usda", moved)  # the re-export
-    moved.touch()
-    report = run_batch([str(moved), str(kept)], out, jobs=1, options=options)
-    assert report.exit_code == 3, report.table()
-    assert [r.status for r in report.results] == ["failed", "skipped"]
-    assert sorted(p.name for p in out.iterdir()) == [REPORT_NAME, "sh020.mcap",
-                                                     "sh020.summary.json"]
-    assert all((out / n).read_bytes() == earlier[n] for n in ("sh020.mcap", "sh020.summary.json"))
-    listed = json.loads((out / REPORT_NAME).read_text())["shots"]
-    assert listed[0]["removed"] == [str(out / "sh010.mcap"), str(out / "sh010.summary.json")]
-    assert listed[1]["removed"] == []
-
-
 def test_bad_input_shot_makes_exit_code_2_and_the_rest_still_convert(tmp_path: Path) -> None:
     bad = tmp_path / "garbage.usda"
     bad.write_text("this is not USD\n")

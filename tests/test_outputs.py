@@ -94,60 +94,6 @@ def test_failed_second_rename_restores_the_first(
     assert str(a) in calls  # the first rename did happen, and was undone
 
 
-def test_a_removal_is_committed_with_the_outputs_all_or_nothing(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """An output registered for removal goes in the commit (a missing one is no error); when
-    a later output's rename fails, the removed file comes back; an input, a folder and an
-    output of the same set are never removed."""
-    old, gone, a, b = (tmp_path / n for n in ("old.mcap", "gone.json", "a.mcap", "b.json"))
-    old.write_bytes(OLD_A)
-    with OutputSet() as out:
-        out.remove(old, "the earlier output")
-        out.remove(gone, "the earlier output")  # nothing there: nothing to do
-        out.add(a, "-o")
-        out.write_bytes(a, b"new A")
-        assert old.read_bytes() == OLD_A  # nothing happens before the commit
-        out.commit()
-    assert not old.exists() and a.read_bytes() == b"new A"
-    assert _names(tmp_path) == ["a.mcap"]  # no backup left behind
-
-    old.write_bytes(OLD_A)
-    b.write_bytes(OLD_B)
-    real_replace = os.replace
-
-    def replace(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> None:
-        if os.fspath(dst) == str(b):  # the output after the removal fails (fault injection)
-            raise OSError(5, "Input/output error")
-        real_replace(src, dst)
-
-    monkeypatch.setattr(outputs_mod.os, "replace", replace)
-
-    def remove_and_write() -> None:
-        with OutputSet() as out:
-            out.remove(old, "the earlier output")
-            out.add(b, "--summary")
-            out.write_bytes(b, b"new B")
-            out.commit()
-
-    with pytest.raises(InputError, match="nothing was replaced"):
-        remove_and_write()
-    assert (old.read_bytes(), b.read_bytes()) == (OLD_A, OLD_B)
-    monkeypatch.undo()
-
-    with OutputSet() as out:
-        out.remove(old, "the earlier output")
-        with pytest.raises(InputError, match=r"old\.mcap"):
-            out.refuse_inputs([(old, "the shot")])
-    with OutputSet() as out, pytest.raises(InputError, match="not a regular file"):
-        out.remove(tmp_path, "the earlier output")
-    with OutputSet() as out:
-        out.add(a, "-o")
-        with pytest.raises(InputError, match="same file"):
-            out.remove(a, "the earlier output")
-    assert old.read_bytes() == OLD_A and a.read_bytes() == b"new A"
-
-
 @pytest.mark.parametrize("device", ["/dev/null", "/dev/full"])
 def test_device_is_refused_and_never_replaced(device: str) -> None:
     before = os.stat(device)
