@@ -17,7 +17,9 @@ Outputs, for a shot ``path/to/NAME.usda``:
 A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
 set file, and whose summary records the same convert options, is skipped (make-style) unless
 ``--force``. A shot that fails writes nothing and removes nothing (as ``convert``): an
-earlier result of it stays, and ``batch_report.json`` says that the shot failed this time.
+earlier result of it stays, ``batch_report.json`` says that the shot failed this time and
+names that earlier MCAP (``earlier_output``), and the failure's line on stderr says it is
+not this version's take.
 
 Exit codes (design.md §5): 0 when every shot converted or was skipped; 2 when any failed shot
 was bad input (or the batch itself was: duplicate output names, bad options); 3 when every
@@ -38,7 +40,7 @@ import signal
 import sys
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -182,6 +184,8 @@ class ShotResult:
         seconds: Conversion wall time in [s] (0 when skipped).
         cpu_seconds: CPU time of the conversion in [s] (0 when skipped).
         summary: The convert summary (read back from the summary file when skipped).
+        earlier_output: For a failed shot, its MCAP path when a file is there from an
+            earlier run (the batch removes nothing), else None.
     """
 
     shot: str
@@ -194,6 +198,7 @@ class ShotResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
+    earlier_output: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """This result as a JSON-able dict."""
@@ -210,6 +215,7 @@ class ShotResult:
             "duration": self.summary.get("duration"),
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
+            "earlier_output": self.earlier_output,
         }
 
 
@@ -659,6 +665,11 @@ def run_batch(
                 _stop_workers(pool, stop, signum)
                 raise
 
+    # A failed shot's earlier take stays (nothing is removed): the report names it
+    for i, r in enumerate(results):
+        if r is not None and r.status == "failed" and os.path.lexists(names[i][0]):
+            results[i] = replace(r, earlier_output=str(names[i][0]))
+
     report = BatchReport(
         outdir=str(out),
         jobs=jobs,
@@ -738,4 +749,7 @@ def batch_command(
     click.echo(report.table())
     for r in report.failed:
         click.echo(one_line(f"ERROR: {r.shot}: {r.reason}"), err=True)
+        if r.earlier_output is not None:
+            click.echo(one_line(f"note: {r.earlier_output} is from an earlier run, not this "
+                                f"version of {Path(r.shot).name}"), err=True)
     ctx.exit(report.exit_code)

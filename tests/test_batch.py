@@ -169,6 +169,29 @@ def test_touched_shot_robot_file_and_force_reconvert(tmp_path: Path) -> None:
         assert statuses() == ["ok"], path
 
 
+def test_a_shot_that_fails_now_keeps_its_earlier_take_and_says_so(tmp_path: Path) -> None:
+    """A shot converted once, then re-exported as a move the robot cannot reach: the batch
+    fails it and removes nothing (its earlier MCAP and summary stay byte for byte), and says
+    that the MCAP there is an earlier run's: in the report and on stderr."""
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    shot = shots / "sh010.usda"
+    shutil.copy2(SAMPLES / "blender_crane_up.usda", shot)
+    out = tmp_path / "out"
+    assert _run("batch", str(shot), "-o", str(out), "--jobs", "1").returncode == 0
+    earlier = {p.name: p.read_bytes() for p in out.iterdir() if p.name != REPORT_NAME}
+    assert sorted(earlier) == ["sh010.mcap", "sh010.summary.json"]
+    shutil.copy2(SAMPLES / "unreachable.usda", shot)  # the re-export
+    shot.touch()
+    proc = _run("batch", str(shot), "-o", str(out), "--jobs", "1")
+    assert proc.returncode == 3, proc.stderr
+    assert {n: (out / n).read_bytes() for n in earlier} == earlier
+    (entry,) = json.loads((out / REPORT_NAME).read_text())["shots"]
+    assert entry["status"] == "failed" and entry["earlier_output"] == str(out / "sh010.mcap")
+    assert f"note: {out / 'sh010.mcap'} is from an earlier run, not this version of " \
+           "sh010.usda" in proc.stderr
+
+
 def test_bad_input_shot_makes_exit_code_2_and_the_rest_still_convert(tmp_path: Path) -> None:
     bad = tmp_path / "garbage.usda"
     bad.write_text("this is not USD\n")
