@@ -34,7 +34,7 @@ from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
-from camtraj.robot import JOINT_NAMES, REVOLUTE, Robot
+from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
 from camtraj.timing import Limits, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
@@ -421,12 +421,15 @@ def run_warnings(analysis: Analysis) -> list[str]:
     return warnings
 
 
-JUMP_OFF_PATH_M = 0.05
+JUMP_OFF_PATH_M = 0.02
 """A joint step beyond an axis's one-frame reach is a jump (a reconfiguration of the arm)
 where, half-way through it, the camera is this far [m] from the middle of its two frames'
-positions (and more than half the camera's own step off it): the arm swings the camera
-through the set between two frames. Along a smooth joint path that distance is second
-order in the step (under a millimetre for a 15 deg per frame whip pan)."""
+positions, beyond what the camera's own turn accounts for (and more than half its own step
+off it): the arm swings the camera through the set between two frames. A camera mounted R
+from the wrist centre and turning by an angle a between the frames swings R (1 - cos(a / 2))
+off the middle by itself; along the shot set's fast steps (whip pans, a truck at the arm's
+full reach) the rest stays under 3 mm, and a reconfiguration moving the track 0.2 m is 5 cm
+off."""
 
 
 def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArray[np.int_],
@@ -436,24 +439,32 @@ def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArr
     papers' per-frame objective every such step (a flip, or a wrap around a limit); for any
     objective a revolute step of more than a quarter turn, or a step where the camera at the
     joints' half-way point leaves the path between its two frames by more than
-    :data:`JUMP_OFF_PATH_M` (the arm reconfigures). The take then has to slow the whole shot
-    to cover it (``--timing optimal`` slows only the frames around it); the largest such
-    step is named. (A move that is simply faster than an axis, like a whip pan, is the
-    timing stage's to report.) ``targets``: the camera poses (n, 4, 4) in the base frame."""
+    :data:`JUMP_OFF_PATH_M` beyond its own turn's swing (the arm reconfigures). The take then
+    has to slow the whole shot to cover it (``--timing optimal`` slows only the frames around
+    it); the largest such step is named. (A move that is simply faster than an axis, like a
+    whip pan, is the timing stage's to report.) ``targets``: the camera poses (n, 4, 4) in
+    the base frame."""
     if path.within_step.all():
         return None
     delta = np.diff(path.q, axis=0)
     steps = np.abs(delta) / (robot.max_velocity * dt)
     over = steps > 1.0
     off = np.zeros(delta.shape[0])
+    swings = np.zeros(delta.shape[0], dtype=bool)
     pairs = np.flatnonzero(over.any(axis=1))  # the camera half-way, where an axis is over
     if pairs.size:
         half = robot.camera_pose(path.q[pairs] + 0.5 * delta[pairs])[:, :3, 3]
         ends = targets[:, :3, 3]
         chord = ends[pairs + 1] - ends[pairs]
         off[pairs] = np.linalg.norm(half - (ends[pairs] + 0.5 * chord), axis=1)
-        off[pairs] *= off[pairs] > 0.5 * np.linalg.norm(chord, axis=1)
-    swings = off > JUMP_OFF_PATH_M
+        # the swing a turn of the camera about the wrist centre makes by itself
+        wrist = robot.link_frames(path.q[pairs])[:, WRIST_FRAME, :3, 3]
+        lever = np.linalg.norm(ends[pairs] - wrist, axis=1)
+        rel = np.einsum("kji,kjl->kil", targets[pairs, :3, :3], targets[pairs + 1, :3, :3])
+        turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+        own = lever * (1.0 - np.cos(0.5 * turn))
+        swings[pairs] = ((off[pairs] - own > JUMP_OFF_PATH_M)
+                         & (off[pairs] > 0.5 * np.linalg.norm(chord, axis=1)))
     jump = over if path.objective == "paper" else over & (
         (REVOLUTE & (np.abs(delta) > 0.5 * math.pi)) | swings[:, None])
     if not jump.any():
@@ -464,8 +475,8 @@ def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArr
     size = f"{math.degrees(step):+.1f} deg" if REVOLUTE[j] else f"{step:+.3f} m"
     count = int(jump.any(axis=1).sum())
     which = "" if path.objective == "shot" else f" of the {path.objective} objective"
-    what = (f"the arm reconfigures: half-way the camera is {off[k]:.2f} m off its path"
-            if swings[k] else f"a flip{which}")
+    what = (f"the arm reconfigures{which}: half-way the camera is {off[k]:.2f} m off its "
+            "path" if swings[k] else f"a flip{which}")
     return (f"{count} frame(s) jump: {JOINT_NAMES[j]} moves {size} between frames "
             f"{int(frames[k])} and {int(frames[k + 1])}, {float(steps[k, j]):.1f}x what it can "
             f"move in one frame ({what}); the take is slowed to cover it (--timing optimal "

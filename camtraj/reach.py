@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.errors import PlacementError
-from camtraj.robot import JOINT_NAMES, Robot
+from camtraj.robot import JOINT_NAMES, WRIST_FRAME, Robot
 from camtraj.urdf import robot_solids
 
 Array = NDArray[np.float64]
@@ -59,7 +59,7 @@ def reach_envelope(robot: Robot, dz: float = 0.05) -> Envelope:
     g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     q = np.zeros((g.shape[0], 8))
     q[:, 2:5] = g
-    wc = robot.link_frames(q)[:, 6, :3, 3]
+    wc = robot.link_frames(q)[:, WRIST_FRAME, :3, 3]
     rho = np.hypot(wc[:, 0] - robot.dh.r10, wc[:, 1])
     z = wc[:, 2]
     z0 = math.floor(z.min() / dz) * dz - dz

@@ -34,6 +34,8 @@ JOINT_KINDS: tuple[str, ...] = (
 N_JOINTS = len(JOINT_NAMES)
 PRISMATIC = np.array([k == "prismatic" for k in JOINT_KINDS])
 REVOLUTE = ~PRISMATIC
+WRIST_FRAME = 6
+"""The DH frame whose origin is the wrist centre, where the pan, tilt and roll axes meet."""
 
 
 @dataclass(frozen=True)

@@ -606,11 +606,13 @@ def test_summary_matches_the_shot(runs: dict[str, Run], key: str) -> None:
 
 def test_an_arm_reconfiguring_between_two_frames_is_named_and_a_fast_move_is_not() -> None:
     """Half-way through the shot the arm switches to another solution of the same poses (the
-    track 0.8 m further, every other axis re-solved on the same branch): each frame is
-    reached, but between two frames the arm swings the camera off its path, which
+    track 0.2 m or 0.8 m further, every other axis re-solved on the same branch): each frame
+    is reached, but between two frames the arm swings the camera off its path, which
     ``step_warning`` names (axis, frames, step, how far off, and that optimal timing slows
-    only around it); the smooth path before the switch and the whip pan's fast steps (beyond
-    the pan's one-frame reach, the camera on its path) are not called jumps."""
+    only around it). Not called jumps: the smooth path before the switch, the whip pan's fast
+    steps (beyond the pan's one-frame reach, the camera on its path), and the same whip pan
+    with every third frame (up to 93 deg a frame) on a camera mounted 0.3 m from the wrist
+    centre, which swings off the middle of its frames by its own turn."""
     from dataclasses import replace
 
     from camtraj.convert import step_warning
@@ -635,35 +637,46 @@ def test_an_arm_reconfiguring_between_two_frames_is_named_and_a_fast_move_is_not
             break
     else:
         pytest.fail("no branch reproduces the solver's frames")
-    for shift in (0.8, -0.8):
-        y, ok = branch_measures(robot, flange[tail], q[tail, 0] + shift, q[tail, 3], q[tail],
-                                branch)
-        if ok.all():
-            break
-    else:
-        pytest.fail("no other track value reaches the second half")
-    switched = np.concatenate([q[:k], y[:, :8]])
-    assert pose_error(robot.fk(switched), flange)[0] < 1e-9  # every frame still reached
-    within = np.concatenate([[True], (np.abs(np.diff(switched, axis=0))
-                                      <= robot.max_velocity * dt).all(axis=1)])
-    warning = step_warning(robot, replace(path, q=switched, within_step=within),
-                           shot.cam2world, shot.frames, dt)
-    assert warning is not None
-    step = switched[k] - switched[k - 1]  # the axis named: the largest step for its reach
-    j = int(np.argmax(np.abs(step) / (robot.max_velocity * dt)))
-    size = (f"{math.degrees(step[j]):+.1f} deg" if JOINT_NAMES[j] not in ("track", "extend")
-            else f"{step[j]:+.3f} m")
-    assert (f"{JOINT_NAMES[j]} moves {size} between frames {shot.frames[k - 1]} and "
-            f"{shot.frames[k]}") in warning, warning
-    off = float(re.search(r"the camera is ([0-9.]+) m off its path", warning).group(1))
-    assert off > 0.05, warning
-    assert "--timing optimal slows only the frames around it" in warning
+    for size in (0.2, 0.8):
+        for shift in (size, -size):
+            y, ok = branch_measures(robot, flange[tail], q[tail, 0] + shift, q[tail, 3],
+                                    q[tail], branch)
+            if ok.all():
+                break
+        else:
+            pytest.fail(f"no track {size} m away reaches the second half")
+        switched = np.concatenate([q[:k], y[:, :8]])
+        assert pose_error(robot.fk(switched), flange)[0] < 1e-9  # every frame still reached
+        within = np.concatenate([[True], (np.abs(np.diff(switched, axis=0))
+                                          <= robot.max_velocity * dt).all(axis=1)])
+        warning = step_warning(robot, replace(path, q=switched, within_step=within),
+                               shot.cam2world, shot.frames, dt)
+        assert warning is not None, size
+        step = switched[k] - switched[k - 1]  # the axis named: the largest step for its reach
+        j = int(np.argmax(np.abs(step) / (robot.max_velocity * dt)))
+        text = (f"{math.degrees(step[j]):+.1f} deg" if JOINT_NAMES[j] not in ("track", "extend")
+                else f"{step[j]:+.3f} m")
+        assert (f"{JOINT_NAMES[j]} moves {text} between frames {shot.frames[k - 1]} and "
+                f"{shot.frames[k]}") in warning, warning
+        found = re.search(r"the arm reconfigures: half-way the camera is ([0-9.]+) m off", warning)
+        assert found is not None and float(found.group(1)) >= 0.02, warning
+        assert "--timing optimal slows only the frames around it" in warning
     whip = read_shot(SHOTS / "whip_pan.usda")
     whip_dt = 1.0 / whip.fps
     fast = solve_path_report(robot, whip.cam2world @ np.linalg.inv(robot.camera2flange),
                              frame_interval=whip_dt)
     assert not fast.within_step.all()  # steps beyond an axis's one-frame reach
     assert step_warning(robot, fast, whip.cam2world, whip.frames, whip_dt) is None
+    mount = robot.camera2flange.copy()
+    mount[:3, 3] = [0.0, 0.0, 0.3]
+    mounted = replace(robot, camera2flange=mount)
+    cams = whip.cam2world[::3]
+    rel = np.einsum("kji,kjl->kil", cams[:-1, :3, :3], cams[1:, :3, :3])
+    turn = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert turn.max() > 80.0  # the camera turns up to 93 deg a frame
+    sparse = solve_path_report(mounted, cams @ np.linalg.inv(mount), frame_interval=whip_dt)
+    assert not sparse.within_step.all()
+    assert step_warning(mounted, sparse, cams, whip.frames[::3], whip_dt) is None
 
 
 def test_a_jump_between_frames_is_named_with_its_axis_frames_and_size() -> None:
