@@ -247,6 +247,7 @@ def test_a_violation_just_over_a_limit_says_by_how_much(limits: Limits) -> None:
     its plain form."""
     vmax = float(limits.velocity[ROTATE])
     for k, expected in ((1.0002, "exceeds 90.0 deg/s by 0.02% on frames"),
+                        (1.00002, "exceeds 90.0 deg/s by under 0.01% on frames"),
                         (1.6, "rotate velocity 144 deg/s exceeds 90.0 deg/s on frames")):
         t, q = bump_path(121, k, vmax, 1.0, 3.0)
         with pytest.raises(TimingLimitError) as info:

@@ -164,7 +164,8 @@ class LimitViolation:
         lim = fmt(self.limit, self.quantity, self.revolute)
         peak = fmt(abs(self.peak), self.quantity, self.revolute)
         # "1.5 m/s^2 exceeds 1.5 m/s^2" reads as no violation: say by how much
-        by = f" by {(self.ratio - 1.0) * 100.0:.2g}%" if peak == lim else ""
+        over = (self.ratio - 1.0) * 100.0  # [%]; below 0.01% the limit's own tolerance
+        by = (f" by {over:.2g}%" if over >= 0.01 else " by under 0.01%") if peak == lim else ""
         return f"{self.axis} {self.quantity} {peak} exceeds {lim}{by} on {self.frame_text}"
 
 
