@@ -256,6 +256,14 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
             progress(round(n * (done[0] + 1) / total) - round(n * done[0] / total))
         done[0] += 1
 
+    def first_stage(st: _Start) -> Refinement:
+        branch, x0, y0, lo1, hi1 = st
+        run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
+                         rounds=s.refine_rounds, tolerance=s.refine_tolerance,
+                         take_speed=take_speed, held=held)
+        run.stage()
+        return run
+
     light_cost = replace(cost, margin=cost.margin * LIGHT_MARGIN, edge_room=True)
     runs: list[Refinement] = []
     firsts: list[Refinement] = []
@@ -264,33 +272,23 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
         heavy, lite = _programme(robot, (cost, light_cost), targets, start, frames, n_track,
                                  n_extend, held)
         starts = _one_per_arm(heavy) if i == 0 else heavy[:1]
-        if i == 0:
-            arms = len(starts)  # the first runs: one per arm configuration
         more = [st for st in lite[:1] if not any(_alike(st, o) for o in starts)]
         step()
-        for k, (branch, x0, y0, lo1, hi1) in enumerate(starts + more):
-            run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
-                             rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                             take_speed=take_speed, held=held)
-            run.stage()
-            (runs if k < len(starts) else light).append(run)
-            if k == 0:
-                firsts.append(run)
+        grid_runs = [first_stage(st) for st in starts]
+        runs += grid_runs
+        light += [first_stage(st) for st in more]
+        firsts.append(grid_runs[0])
+        if i == 0:
+            per_arm = grid_runs  # the first grid's: one per arm configuration
         step()
     # an arm whose first stage ended far behind the fastest start may only be held back by
     # the grid: its programme again on twice the track values
     top = max(r.best[0] for r in runs + light)
-    behind = {int(r.branch[0]) >> 1 for r in runs[:arms] if r.best[0] < SLOW_ARM * top}
+    behind = {_arm(r.branch) for r in per_arm if r.best[0] < SLOW_ARM * top}
     if behind:
         (dense,) = _programme(robot, (cost,), targets, start, frames, 2 * s.track_samples,
                               s.extend_samples, held)
-        for branch, x0, y0, lo1, hi1 in _one_per_arm(dense):
-            if int(branch[0]) >> 1 in behind:
-                run = Refinement(robot, cost, targets, branch, x0, y0, lo1, hi1,
-                                 rounds=s.refine_rounds, tolerance=s.refine_tolerance,
-                                 take_speed=take_speed, held=held)
-                run.stage()
-                runs.append(run)
+        runs += [first_stage(st) for st in _one_per_arm(dense) if _arm(st[0]) in behind]
     # the starts within a hundredth of the fastest all go on (a near tie after one stage
     # says little about which basin is better), and so do the grids' own choices that would
     # have gone on without the other arms' starts: the answer is never slower than theirs
@@ -350,6 +348,12 @@ def _alike(a: _Start, b: _Start) -> bool:
     return bool(2 * np.count_nonzero(same) >= same.size)
 
 
+def _arm(branch: NDArray[np.intp]) -> int:
+    """A start's arm configuration: its first frame's branch bits but the wrist flip (branch
+    bits: rotate back 4, elbow 2, wrist flip 1)."""
+    return int(branch[0]) >> 1
+
+
 def _one_per_arm(starts: list[_Start]) -> list[_Start]:
     """The cheapest of the programme's answers (cheapest first) for each arm configuration:
     rotate towards or away from the target, elbow up or down. The two wrist flips of one arm
@@ -358,7 +362,7 @@ def _one_per_arm(starts: list[_Start]) -> list[_Start]:
     seen: set[int] = set()
     out = []
     for st in starts:
-        arm = int(st[0][0]) >> 1  # branch bits: rotate back (4), elbow (2), wrist flip (1)
+        arm = _arm(st[0])
         if arm not in seen:
             seen.add(arm)
             out.append(st)
