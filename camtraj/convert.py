@@ -127,6 +127,13 @@ CUT_MIN_M, CUT_MIN_RAD = 0.05, math.radians(5.0)
 """Steps smaller than these are never called a cut."""
 
 
+def _turns(a: Array, b: Array) -> Array:
+    """The angle [rad] (k,) the camera turns from each pose a (k, 4, 4) to b (k, 4, 4)."""
+    rel = np.einsum("kji,kjl->kil", a[:, :3, :3], b[:, :3, :3])
+    return np.asarray(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0,
+                                        -1.0, 1.0)))
+
+
 def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> list[str]:
     """Where the camera jumps between two frames (a cut left in the shot): a translation or
     rotation step :data:`CUT_RATIO` times the largest step within ``around`` frames of it,
@@ -136,8 +143,7 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
     if n < 3:
         return []
     move = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
-    rel = np.einsum("kji,kjl->kil", targets[:-1, :3, :3], targets[1:, :3, :3])
-    turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+    turn = _turns(targets[:-1], targets[1:])
     out, after = [], []
     for k in range(n - 1):
         lo, hi = max(0, k - around), min(n - 1, k + around + 1)
@@ -460,9 +466,7 @@ def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArr
         # the swing a turn of the camera about the wrist centre makes by itself
         wrist = robot.link_frames(path.q[pairs])[:, WRIST_FRAME, :3, 3]
         lever = np.linalg.norm(ends[pairs] - wrist, axis=1)
-        rel = np.einsum("kji,kjl->kil", targets[pairs, :3, :3], targets[pairs + 1, :3, :3])
-        turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
-        own = lever * (1.0 - np.cos(0.5 * turn))
+        own = lever * (1.0 - np.cos(0.5 * _turns(targets[pairs], targets[pairs + 1])))
         swings[pairs] = ((off[pairs] - own > JUMP_OFF_PATH_M)
                          & (off[pairs] > 0.5 * np.linalg.norm(chord, axis=1)))
     jump = over if path.objective == "paper" else over & (
