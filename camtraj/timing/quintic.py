@@ -8,8 +8,8 @@ derivatives are either given (*clamped*) or left free with zero third and fourth
 (*natural*). The natural quintic spline is the interpolant with the least integrated squared
 third derivative (jerk) of all curves through the knots: nothing about the ends is made up.
 
-The conditions form a block-tridiagonal system in ``(v_i, w_i)`` with 2x2 blocks; it is
-solved for all axes at once by parallel cyclic reduction (log2(n) vectorised steps).
+The conditions form a block-tridiagonal system in ``(v_i, w_i)`` with 2x2 blocks, solved
+as a banded system by LAPACK (one call for all axes that share their clamped knots).
 
 Units: everything here is per knot interval ("frame units"); the caller scales to time.
 """
@@ -116,105 +116,51 @@ def solve_knot_derivatives(
     rhs[cl] = np.stack([v_given.T[cl], w_given.T[cl]], axis=-1)
     lo[:, 0] = 0.0
     up[:, -1] = 0.0
+    same: dict[bytes, list[int]] = {}  # axes with the same clamped knots: the same matrix
+    for axis in range(m):
+        same.setdefault(cl[axis].tobytes(), []).append(axis)
     x = _solve_block_tridiagonal(
         lo.transpose(2, 3, 0, 1), di.transpose(2, 3, 0, 1), up.transpose(2, 3, 0, 1),
-        rhs.transpose(2, 0, 1),
+        rhs.transpose(2, 0, 1), list(same.values()),
     )  # [r, m, n]
     v = np.where(clamped, v_given, x[0].T)
     w = np.where(clamped, w_given, x[1].T)
     return v, w
 
 
-def _inv(a: Array) -> Array:
-    """Inverses of 2x2 matrices stored as ``a[r, c, ...]``."""
-    det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-    out = np.empty_like(a)
-    np.divide(a[1, 1], det, out=out[0, 0])
-    np.divide(a[0, 0], det, out=out[1, 1])
-    np.divide(a[0, 1], -det, out=out[0, 1])
-    np.divide(a[1, 0], -det, out=out[1, 0])
-    return out
-
-
-def _mul(a: Array, b: Array) -> Array:
-    """Products of 2x2 matrices ``a[r, c, ...]`` with matrices ``b[r, c, ...]`` or vectors
-    ``b[r, ...]`` (einsum with the block index first is fast; matmul on 2x2 blocks is not)."""
-    if b.ndim == a.ndim:
-        out: Array = np.einsum("ij...,jk...->ik...", a, b)
-        return out
-    vec: Array = np.einsum("ij...,j...->i...", a, b)
-    return vec
-
-
-def _pad(a: Array, size: int, *, front: bool, fill: Array | None = None) -> Array:
-    """``a`` (blocks along the last axis) with one block of ``fill`` (default zero) in front
-    or behind, cut to ``size`` blocks."""
-    out = np.zeros((*a.shape[:-1], size))
-    if fill is not None:
-        out[..., 0 if front else size - 1] = fill.reshape(fill.shape + (1,) * (a.ndim - 3))
-    k = min(a.shape[-1], size - 1) if front else min(a.shape[-1], size)
-    if front:
-        out[..., 1 : 1 + k] = a[..., :k]
-    else:
-        out[..., :k] = a[..., :k]
-    return out
-
-
-_EYE = np.eye(2)
-_DENSE = 48  # systems this small are solved as dense matrices
-
-
-def _solve_dense(lo: Array, di: Array, up: Array, rhs: Array) -> Array:
-    """The block-tridiagonal system as one dense (2n x 2n) matrix per system."""
-    n, m = di.shape[-1], di.shape[-2]
-    mat = np.zeros((m, n, 2, n, 2))
-    i = np.arange(n)
-    mat[:, i, :, i, :] = di.transpose(3, 2, 0, 1)
-    mat[:, i[1:], :, i[1:] - 1, :] = lo[..., 1:].transpose(3, 2, 0, 1)
-    mat[:, i[:-1], :, i[:-1] + 1, :] = up[..., :-1].transpose(3, 2, 0, 1)
-    b = rhs.transpose(1, 2, 0).reshape(m, 2 * n, 1)
-    x = np.linalg.solve(mat.reshape(m, 2 * n, 2 * n), b)
-    return np.ascontiguousarray(x.reshape(m, n, 2).transpose(2, 0, 1))
-
-
-def _solve_block_tridiagonal(lo: Array, di: Array, up: Array, rhs: Array) -> Array:
-    """Solve ``lo_i x_{i-1} + di_i x_i + up_i x_{i+1} = rhs_i`` by cyclic reduction.
+def _solve_block_tridiagonal(lo: Array, di: Array, up: Array, rhs: Array,
+                             same: list[list[int]]) -> Array:
+    """Solve ``lo_i x_{i-1} + di_i x_i + up_i x_{i+1} = rhs_i`` for every system.
 
     Args:
         lo, di, up: 2x2 blocks stored as ``[r, c, m, n]`` (m independent systems of n
             block rows); ``lo[..., 0]`` and ``up[..., -1]`` must be zero.
         rhs: Right-hand sides, ``[r, m, n]``.
+        same: The systems grouped by equal matrices (every system in one group).
 
     Returns:
         ``x`` as ``[r, m, n]``.
 
-    The odd-numbered unknowns are eliminated from the even-numbered equations, which
-    leaves a block-tridiagonal system of half the size; solved the same way, its answer
-    gives back the odd unknowns. Every step is vectorised over all systems and rows.
+    Each system is a band of three scalars either side of the diagonal (unknowns ordered
+    v_0, w_0, v_1, ...), solved by LAPACK's banded LU with partial pivoting (scipy's
+    ``solve_banded``); systems with the same matrix (axes with the same clamped knots) are
+    solved in one call with several right-hand sides.
     """
-    n = di.shape[-1]
-    if n <= _DENSE:
-        return _solve_dense(lo, di, up, rhs)
-    ne = (n + 1) // 2
-    inv_odd = _inv(di[..., 1::2])
-    lo_o, up_o, rhs_o = lo[..., 1::2], up[..., 1::2], rhs[..., 1::2]
-    # Odd neighbours of every even row: left (index k-1) and right (index k).
-    inv_l = _pad(inv_odd, ne, front=True, fill=_EYE)
-    inv_r = _pad(inv_odd, ne, front=False, fill=_EYE)
-    lo_e, di_e, up_e, rhs_e = lo[..., 0::2], di[..., 0::2], up[..., 0::2], rhs[..., 0::2]
-    alpha = -_mul(lo_e, inv_l)
-    gamma = -_mul(up_e, inv_r)
-    di2 = (di_e + _mul(alpha, _pad(up_o, ne, front=True))
-           + _mul(gamma, _pad(lo_o, ne, front=False)))
-    rhs2 = (rhs_e + _mul(alpha, _pad(rhs_o, ne, front=True))
-            + _mul(gamma, _pad(rhs_o, ne, front=False)))
-    lo2 = _mul(alpha, _pad(lo_o, ne, front=True))
-    up2 = _mul(gamma, _pad(up_o, ne, front=False))
-    x_e = _solve_block_tridiagonal(lo2, di2, up2, rhs2)
-    no = n // 2
-    x_next = _pad(x_e[..., 1:], no, front=False)
-    x_o = _mul(inv_odd, rhs_o - _mul(lo_o, x_e[..., :no]) - _mul(up_o, x_next))
-    x = np.empty_like(rhs)
-    x[..., 0::2] = x_e
-    x[..., 1::2] = x_o
-    return x
+    from scipy.linalg import solve_banded
+
+    n, m = di.shape[-1], di.shape[-2]
+    first = [axes[0] for axes in same]  # each group's matrix, as its first system's
+    # ab[3 + row - col, col] holds the entry (row, col); block row i, entry (r, c) of the
+    # block coupling knot i with knot i + s sits at row 2 i + r, column 2 (i + s) + c
+    ab = np.zeros((len(same), 7, 2 * n))
+    for shift, blocks in ((-1, lo), (0, di), (1, up)):
+        rows = np.arange(max(0, -shift), min(n, n - shift))  # knots with a partner
+        for r in range(2):
+            for c in range(2):
+                ab[:, 3 + r - c - 2 * shift, 2 * (rows + shift) + c] = \
+                    blocks[r, c][first][:, rows]
+    b = rhs.transpose(1, 2, 0).reshape(m, 2 * n)  # [m, 2n], v and w interleaved
+    x = np.empty_like(b)
+    for k, axes in enumerate(same):
+        x[axes] = solve_banded((3, 3), ab[k], b[axes].T, check_finite=False).T
+    return np.ascontiguousarray(x.reshape(m, n, 2).transpose(2, 0, 1))
