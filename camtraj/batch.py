@@ -64,7 +64,7 @@ from camtraj.outputs import (
     refuse_overlaps,
     remove_stale_temps,
 )
-from camtraj.shown import speed_percent
+from camtraj.shown import frame_span, speed_percent
 
 __all__ = [
     "REPORT_NAME",
@@ -322,10 +322,10 @@ def _format_frames(frames: Any) -> str:
         first, last = frames.get("first"), frames.get("last")
         count = frames.get("count")
         if first is not None and last is not None:
-            return f"{first}-{last}"
+            return frame_span(first, last)
         return str(count) if count is not None else "-"
     if isinstance(frames, list | tuple) and len(frames) == 2:
-        return f"{frames[0]}-{frames[1]}"
+        return frame_span(frames[0], frames[1])
     return str(frames)
 
 

@@ -37,6 +37,7 @@ from camtraj.robot import JOINT_NAMES, REVOLUTE
 from camtraj.shown import (
     edge_use,
     frame_rate,
+    frame_span,
     percent,
     scale_fit,
     seconds,
@@ -379,7 +380,7 @@ def info(mcap_file: str, as_json: bool) -> None:
     lines = [
         f"file       {d['path']}  ({d['size_bytes'] / 1e6:.2f} MB, profile {d['profile']})",
         f"shot       {d.get('source_file')}  camera {d.get('camera_prim')}",
-        f"frames     {fr.get('first')}-{fr.get('last')} ({fr.get('count')} frames at "
+        f"frames     {frame_span(fr.get('first'), fr.get('last'))} ({fr.get('count')} frames at "
         f"{f'{rate:.6g}' if isinstance(rate, float) else rate} fps)",
         f"take       {d['duration_s']:.3f} s{grid}, timing {mode}, speed factor {factor}",
         f"robot      {meta.get('robot')}",
@@ -577,7 +578,7 @@ def _report(r: dict[str, Any]) -> str:
         return "\n".join(lines)
     fr = r["frames"]
     lines = [
-        f"{r['shot']}  camera {r['camera']}  frames {fr['first']}-{fr['last']} "
+        f"{r['shot']}  camera {r['camera']}  frames {frame_span(fr['first'], fr['last'])} "
         f"({fr['count']} at {r['fps']:g} fps)",
         f"  timing {r['timing']}: take {seconds(r['duration'])} s (shot "
         f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "

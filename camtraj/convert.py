@@ -36,6 +36,7 @@ from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
+from camtraj.shown import frame_span
 from camtraj.timing import Limits, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
@@ -385,7 +386,7 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
     return {
         "source_file": str(shot_path),
         "camera_prim": shot.camera_path,
-        "frame_range": f"{int(shot.frames[0])}-{int(shot.frames[-1])}",
+        "frame_range": frame_span(int(shot.frames[0]), int(shot.frames[-1])),
         "fps": repr(float(shot.fps)),
         "robot": f"{robot.name} ({robot.source})",
         "ik_objective": options.objective or robot.ik.objective,

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import os
 
+from camtraj.shown import frame_span
+
 
 def one_line(text: str | os.PathLike[str]) -> str:
     """A path or a message as printed on one line: a newline or other character that does
@@ -147,9 +149,9 @@ def _frame_ranges(frames: list[int]) -> str:
         if f == prev + 1:
             prev = f
             continue
-        parts.append(f"{start}-{prev}" if prev != start else f"{start}")
+        parts.append(frame_span(start, prev) if prev != start else f"{start}")
         start = prev = f
-    parts.append(f"{start}-{prev}" if prev != start else f"{start}")
+    parts.append(frame_span(start, prev) if prev != start else f"{start}")
     return "frames " + ", ".join(parts)
 
 

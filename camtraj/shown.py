@@ -12,7 +12,7 @@ import math
 from collections.abc import Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "percent",
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "frame_span", "percent",
            "scale_fit", "seconds", "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
@@ -24,6 +24,13 @@ def percent(x: float) -> str:
     if not math.isfinite(x):
         return "-"
     return f"{100 * x:.0f}%" if x < 100.0 else ">9999%"
+
+
+def frame_span(first: object, last: object) -> str:
+    """Film frames first to last: '1001-1096', or '-24 to 23' when a frame is negative (a
+    hyphen would read as a minus sign: '-30--1')."""
+    negative = any(isinstance(f, int | float) and f < 0 for f in (first, last))
+    return f"{first} to {last}" if negative else f"{first}-{last}"
 
 
 def seconds(x: float, digits: int = 2) -> str:

@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdRender
 
 from camtraj.errors import ShotFileError, frame_ranges
+from camtraj.shown import frame_span
 
 __all__ = ["YUP2ZUP", "Shot", "list_cameras", "read_shot"]
 
@@ -621,12 +622,12 @@ def _film_frames(
             msg = f"frame range must be two integers (first, last), not {frames!r}"
             raise ShotFileError(msg) from None
         if first > last:
-            msg = f"{path}: frame range {first}-{last} is backwards (first > last)"
+            msg = f"{path}: frame range {frame_span(first, last)} is backwards (first > last)"
             raise ShotFileError(msg)
         if span is not None and (first < span[0] or last > span[1]):
             msg = (
-                f"{path}: frames {first}-{last} are outside the shot's {what}, "
-                f"film frames {span[0]}-{span[1]}"
+                f"{path}: frames {frame_span(first, last)} are outside the shot's {what}, "
+                f"film frames {frame_span(*span)}"
             )
             raise ShotFileError(msg)
     count = last - first + 1

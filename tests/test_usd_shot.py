@@ -298,6 +298,16 @@ def test_bad_frame_range(frames: tuple[int, int], words: list[str]) -> None:
         assert word in str(info.value)
 
 
+def test_negative_frames_are_written_as_a_to_b_not_with_a_double_hyphen(tmp_path: Path) -> None:
+    path = _static_camera(tmp_path, frames=(-24, 23))
+    with pytest.raises(ShotFileError) as info:
+        read_shot(path, frames=(-30, -1))
+    assert "frames -30 to -1 are outside" in str(info.value)
+    assert "film frames -24 to 23" in str(info.value)
+    assert "--" not in str(info.value)
+    assert read_shot(path, frames=(-3, 2)).frames.tolist() == [-3, -2, -1, 0, 1, 2]
+
+
 def test_static_camera_without_any_range_is_an_error(tmp_path: Path) -> None:
     path = _static_camera(tmp_path, frames=None)
     with pytest.raises(ShotFileError, match="no frame range"):

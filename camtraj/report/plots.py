@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.report.samples import QUANTITIES
+from camtraj.shown import frame_span
 
 if TYPE_CHECKING:
     from camtraj.report.data import ReportData
@@ -185,7 +186,7 @@ def _draw_axis(ax: Any, data: ReportData, axis: int) -> list[Any]:
             ta, tb = _span(data, a, b)
             added.append(ax.axvspan(ta, tb, color=_RED, alpha=0.15, lw=0, zorder=1,
                                     gid=f"{name}-{quantity}-violation-{a}-{b}"))
-            label = f"frames {a}-{b}" if b != a else f"frame {a}"
+            label = f"frames {frame_span(a, b)}" if b != a else f"frame {a}"
             ratio = span_peak(data, axis, quantity, a, b, v.ratio)
             labels.append(ax.text(
                 0.5 * (ta + tb), 0.96, f"{quantity} {ratio:.3g}{TIMES} limit, {label}",
