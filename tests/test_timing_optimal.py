@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from camtraj.ik.path import solve_path
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.timing import Limits, Take, TimingLimitError, time_shot
+from camtraj.timing.clock import MAX_FRAME_RATE
 from camtraj.usd_shot import read_shot
 from tests.shot_set import SAMPLES, SHOTS
 from tests.timing_checks import FPS, HOME, divided, frame_times
@@ -83,6 +84,13 @@ def _synthetic() -> dict[str, tuple[Array, float]]:
     q = np.tile(HOME, (3, 1))
     q[:, TRACK] += [0.0, 0.002, 0.005]
     out["three-frame nudge"] = (q, FPS)
+    # A creep of 1 mm/s for 20 s: the limits would let it run 2000x faster; played 1000x
+    # faster its frames were 42 us apart and the file's nanosecond stamps read 1843x the
+    # track's jerk limit (clock.MAX_FRAME_RATE).
+    t = frame_times(481)
+    q = np.tile(HOME, (t.size, 1))
+    q[:, TRACK] += 0.001 * t
+    out["creep"] = (q, FPS)
     return out
 
 
@@ -160,6 +168,19 @@ def test_the_files_nanosecond_stamps_keep_every_limit(
 
 
 @pytest.mark.parametrize("name", NAMES)
+def test_no_more_than_the_most_frames_a_second(
+    takes: dict[str, tuple[Array, Take, Take]], name: str
+) -> None:
+    """Frames are at least 1 / MAX_FRAME_RATE apart in every optimal take (the creep's would
+    be 42 us apart, at a 24 kHz servo rate), and the servo rate is the requested 250 Hz up
+    to a whole number of ticks per frame interval (at least one: at most 4/3 of it)."""
+    _, take, _ = takes[name]
+    gaps = np.diff(take.frame_times)
+    assert gaps.min() >= (1.0 / MAX_FRAME_RATE) * (1 - 1e-9), gaps.min()
+    assert take.rate <= 250.0 * 4.0 / 3.0, take.rate
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_never_slower_than_scale(takes: dict[str, tuple[Array, Take, Take]], name: str) -> None:
     _, take, scale = takes[name]
     opt = take.shot_end - take.shot_start
@@ -183,6 +204,7 @@ def test_never_slower_than_the_shot_at_its_maximum_feasible_speed(
         pytest.skip("the shot holds still somewhere: optimal keeps holds, a uniform law not")
     fps = {**sample_paths, **SYNTHETIC}[name][1]
     fastest = max(scale.report.max_speed, 1.0)  # a slower shot: the scale take itself
+    fastest = min(fastest, max(1.0, MAX_FRAME_RATE / fps))  # at most 250 frames a second
     uniform = time_shot(q, frame_times(q.shape[0], fps * fastest), limits, mode="scale")
     assert take.t[-1] <= uniform.t[-1] * (1 + 1e-6), (take.t[-1], uniform.t[-1])
 

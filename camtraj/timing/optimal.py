@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.timing.clock import MAX_FRAME_RATE
 from camtraj.timing.limits import LIMIT_RTOL, Limits, slowdown
 from camtraj.timing.path import FramePath, Samples, runs
 
@@ -97,6 +98,7 @@ ROW_SPREAD = 3
 ALL_ROWS_ABOVE = 0.5
 #: The path speed stays between these multiples of the scale take's speed.
 SPEED_RANGE = (1e-2, 1e3)
+
 #: The programs' rows are relaxed by this fraction, so that an answer that meets them within
 #: the solver's tolerance meets them when its state starts the next window (the check after
 #: the programs removes what that and the points' spacing let through).
@@ -386,12 +388,18 @@ def _safe_speeds(path: FramePath, a: int, b: int, limits: Limits, u_scale: float
             limits.velocity**2 / (2.0 * p1**2), limits.acceleration / (2.0 * np.abs(p2))),
             0.5 * (limits.jerk / np.maximum(np.abs(p3), np.abs(p3_left))) ** (2.0 / 3.0)),
             axis=1) / u_scale
-    cap = np.minimum(cap, SPEED_RANGE[1] ** 2)
+    cap = np.minimum(np.minimum(cap, _frame_rate_cap(u_scale)), SPEED_RANGE[1] ** 2)
     suffix = np.minimum.accumulate(cap[::-1])[::-1]
     if end is not None:
         suffix = np.minimum(suffix, _braking(p1, p2, p3, limits, u_scale, end))
     out: Array = suffix[::POINTS_PER_FRAME]
     return out
+
+
+def _frame_rate_cap(u_scale: float) -> float:
+    """:data:`MAX_FRAME_RATE` as a cap on ``u`` in units of ``u_scale`` (never below the
+    scale take's own speed, 1)."""
+    return max(0.5 * MAX_FRAME_RATE**2 / u_scale, 1.0)
 
 
 def _braking(p1: Array, p2: Array, p3: Array, limits: Limits, u_scale: float,
@@ -485,9 +493,10 @@ class _Rows:
             owner.append(at)
             is_jerk.append(np.full(at.size, jerk_row))
 
-        # Velocity: u <= V² / (2 p1²) on the tightest axis.
+        # Velocity: u <= V² / (2 p1²) on the tightest axis, and the frames' own rate.
         with np.errstate(divide="ignore"):
-            cap = np.min(limits.velocity**2 / (2.0 * p1**2), axis=1) / u_scale
+            cap = np.minimum(np.min(limits.velocity**2 / (2.0 * p1**2), axis=1) / u_scale,
+                             _frame_rate_cap(u_scale))
         at = np.flatnonzero(cap < SPEED_RANGE[1] ** 2)
         add(basis[0][at].multiply(1.0 / cap[at][:, None]), at, False)
         moving = (np.abs(p1) + np.abs(p2) + np.abs(p3)) > 0

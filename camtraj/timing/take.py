@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.shown import scale_fit
-from camtraj.timing.clock import on_the_clock
+from camtraj.timing.clock import MAX_FRAME_RATE, on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
     Edge,
@@ -279,7 +279,9 @@ def time_shot(
         # run-up and run-out have room too, and are no longer than that take's.
         uniform_takes = [scaled()]
         if need < 1.0 and not path.still.all(axis=1).any():
-            uniform_takes.append(scaled(floor=1.0 / MAX_SCALE))
+            # and no more than MAX_FRAME_RATE film frames a second
+            uniform_takes.append(scaled(floor=max(1.0 / MAX_SCALE,
+                                                  min(1.0, 1.0 / (MAX_FRAME_RATE * dt)))))
         speed_factor, ticks, shot, shot_x, up, out = min(
             uniform_takes, key=lambda take: _uniform_length(take, n, dt))
         del uniform_takes  # their samples, but the take's
