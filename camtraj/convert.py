@@ -37,7 +37,7 @@ from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
 from camtraj.shown import frame_span
-from camtraj.timing import Limits, TimingLimitError, time_shot
+from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
@@ -239,6 +239,9 @@ def analyse(
             jump = step_warning(robot, analysis.path, targets, shot.frames, 1.0 / shot.fps)
             for note in cuts or ([jump] if jump else []):
                 exc.add_note(note)
+            held = hold_note(camera_holds(targets), shot.frames, exc.violations)
+            if held and not cuts:
+                exc.add_note(held)
             raise
     set_file = SetFile.read(options.set_file) if options.set_file is not None else None
     if set_file is not None and set_file.prims:
@@ -426,6 +429,41 @@ def run_warnings(analysis: Analysis) -> list[str]:
     if flip:
         warnings.append(flip)
     return warnings
+
+
+HOLD_EDGE_FRAMES = 3
+"""Frames either side of a hold's edge where a run over a limit is the edge's doing: the
+spline's jerk from a stop within one frame spreads over the two or three frames around it."""
+
+
+def hold_note(held: NDArray[np.bool_], frames: NDArray[np.int_],
+              violations: list[LimitViolation]) -> str | None:
+    """A note where the limits are exceeded next to a hold of the camera: the robot holds
+    still wherever the camera does, so an animation that runs into a hold still moving, or
+    still accelerating (an ease whose last key is flat in speed but not in acceleration, as
+    a smoothstep or a flat Bezier tangent), asks the robot to stop or start within one
+    frame interval. ``held``: the camera's held frame pairs (n - 1,); ``violations``: the
+    timing stage's, their frames as film frame numbers."""
+    n = held.size + 1
+    starts = np.flatnonzero(held & ~np.concatenate([[False], held[:-1]]))  # first pairs
+    ends = np.flatnonzero(held & ~np.concatenate([held[1:], [False]])) + 1  # last frames
+    edges = [(int(frames[k]), "stops dead into") for k in starts if k > 0]
+    edges += [(int(frames[k]), "starts out of") for k in ends if k < n - 1]
+    # a run of frames over a limit that lies within HOLD_EDGE_FRAMES of the edge (a move
+    # too fast for an axis between two holds, a whip pan, is over along the whole move)
+    runs = [r for v in violations if v.quantity in ("acceleration", "jerk") for r in v.frames]
+    near = sorted({(f, what) for f, what in edges
+                   if any(f - HOLD_EDGE_FRAMES <= a and b <= f + HOLD_EDGE_FRAMES
+                          for a, b in runs)})
+    if not near:
+        return None
+    said = " and ".join(f"{what} a hold at frame {f}" for f, what in near[:4])
+    more = f" (and {len(near) - 4} more)" if len(near) > 4 else ""
+    return (f"the limits are exceeded where the camera {said}{more}: the robot holds still "
+            "where the camera does, so a move that reaches a hold still decelerating (or "
+            "leaves it at once) must stop (or start) within a frame; ease the animation into "
+            "and out of holds over more frames, or --timing optimal slows only the frames "
+            "around them")
 
 
 JUMP_OFF_PATH_M = 0.02

@@ -31,12 +31,14 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom
 
-from tests.conftest import run_forked, snapshot
+from camtraj.robot import Robot
+from tests.conftest import rot_z, run_forked, snapshot
 from tests.test_convert import ROOT, SHOTS, run_cli
 
 MAYA = SHOTS / "maya_dolly_push_in.usda"
@@ -601,6 +603,42 @@ def test_a_cut_left_in_the_shot_is_named_where_the_limits_fail(tmp_path: Path) -
         piece = tmp_path / f"cut_{part.replace(':', '_')}.mcap"
         done = run_cli("convert", tmp_path / "cut.usda", "-o", piece, "--frames", part)
         assert done.returncode == 0 and piece.stat().st_size > 0, done.stderr
+
+
+def _hold_between_moves(tmp_path: Path, ease: Any) -> Path:
+    """A half-metre truck and pan eased by ``ease`` into a hold (frames 36-60), then out."""
+    from tests.shots import write_shot
+
+    robot = Robot.default()
+    look = robot.camera_pose(np.zeros(8))[:3, :3]
+    out = np.tile(np.eye(4), (96, 1, 1))
+    for i, f in enumerate(range(1, 97)):
+        s = ease(min((f - 1) / 35, 1.0)) - ease(max((f - 60) / 36, 0.0))
+        out[i, :3, :3] = rot_z(0.2 * s) @ look
+        out[i, :3, 3] = (4.5 + 0.5 * s, 0.0, 0.9)
+    return write_shot(tmp_path / "hold.usda", out)
+
+
+def test_a_move_that_stops_dead_into_a_hold_is_named_and_an_eased_one_fits(
+        tmp_path: Path) -> None:
+    """A smoothstep (flat in speed, not in acceleration at its ends) into and out of a hold
+    asks the robot, which holds where the camera holds, to stop within a frame: the timing
+    error says so at the hold's two edges. The same move eased to zero acceleration
+    (smootherstep) runs at real time."""
+    from camtraj.convert import analyse
+    from camtraj.options import ConvertOptions
+    from camtraj.timing import TimingLimitError
+
+    with pytest.raises(TimingLimitError) as info:
+        analyse(_hold_between_moves(tmp_path, lambda u: u * u * (3 - 2 * u)), ConvertOptions())
+    notes = [n for n in getattr(info.value, "__notes__", []) if "hold" in n]
+    assert len(notes) == 1, getattr(info.value, "__notes__", [])
+    assert ("the camera stops dead into a hold at frame 36 and starts out of a hold at "
+            "frame 60:") in notes[0]
+    assert "--timing optimal" in notes[0]
+    smooth = analyse(_hold_between_moves(tmp_path, lambda u: u**3 * (10 - 15 * u + 6 * u * u)),
+                     ConvertOptions())
+    assert smooth.take is not None and smooth.take.report.max_speed >= 1.0
 
 
 def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
