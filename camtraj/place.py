@@ -39,7 +39,7 @@ from camtraj.inputs import one_line
 from camtraj.options import TIMING_MODES
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
-from camtraj.set_file import SetFile, floor_polygon
+from camtraj.set_file import SetFile, floor_polygon, yaw_pose
 from camtraj.shown import TABLE_MAX_SPEED, speed_percent
 from camtraj.timing import Limits, TimingLimitError, time_shot
 
@@ -119,7 +119,7 @@ class Result:
         return (self.reachable, float(self.collision_free), float(self.feasible), speed, margin)
 
     def base2world(self, z: float) -> Array:
-        return pose(self.x, self.y, z, self.yaw_deg)
+        return yaw_pose(self.x, self.y, z, self.yaw_deg)
 
     def to_json(self) -> dict[str, Any]:
         return {"x": self.x, "y": self.y, "yaw_deg": self.yaw_deg, "ok": self.ok,
@@ -127,16 +127,6 @@ class Result:
                 "collision_free": self.collision_free, "feasible": self.feasible,
                 "max_speed": self.max_speed if math.isfinite(self.max_speed) else None,
                 "binding": self.binding, "margins": self.margins, "reason": self.reason}
-
-
-def pose(x: float, y: float, z: float, yaw_deg: float) -> Array:
-    """Base-to-world transform of a placement."""
-    a = math.radians(yaw_deg)
-    T = np.eye(4)
-    T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                 [0.0, 0.0, 1.0]]
-    T[:3, 3] = (x, y, z)
-    return T
 
 
 def margins(robot: Robot, q: Array) -> dict[str, float]:
@@ -192,7 +182,7 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     from camtraj.collision import collision_error, sample_times, take_samples
 
     robot = problem.robot
-    base2world = pose(x, y, problem.base_z, yaw_deg)
+    base2world = yaw_pose(x, y, problem.base_z, yaw_deg)
     idx = np.arange(0, problem.cam2world.shape[0], stride)
     flange2base = (np.linalg.inv(base2world) @ problem.cam2world[idx]
                    @ np.linalg.inv(robot.camera2flange))
@@ -324,7 +314,7 @@ class Layout:
                             if i in self.results else _UNSOLVED, i)))
 
     def base2world(self, z: float) -> Array:
-        return pose(self.x, self.y, z, self.yaw_deg)
+        return yaw_pose(self.x, self.y, z, self.yaw_deg)
 
 
 def _race(runner: _Runner, layouts: list[Layout], strides: dict[int, int], need: int) -> None:
@@ -887,7 +877,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                        f"{slower}", err=True)
             ctx.exit(3)
         if output is not None:
-            text = to_toml(best.base2world(report.base_z), report.set_file.raw)
+            text = to_toml(best.x, best.y, report.base_z, best.yaw_deg, report.set_file.raw)
             _write(ctx, outputs, output, text, as_json)
 
 
@@ -923,6 +913,7 @@ def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str
                    f"split: {split_text(report)} (place each group on its own)", err=True)
         ctx.exit(3)
     if output is not None:
-        text = to_toml(report.layout.base2world(report.base_z), report.set_file.raw,
+        lay = report.layout
+        text = to_toml(lay.x, lay.y, report.base_z, lay.yaw_deg, report.set_file.raw,
                        layout=name)
         _write(ctx, outputs, output, text, as_json)

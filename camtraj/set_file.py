@@ -183,18 +183,27 @@ def floor_polygon(points: Array, meters_per_unit: float, up_axis: str, source: s
     return xy
 
 
-def to_toml(base2world: Array, raw: dict[str, Any], layout: str | None = None) -> str:
-    """A set file: ``raw``'s tables as they were, with ``[placement]`` replaced by ``base2world``.
+def yaw_pose(x: float, y: float, z: float, yaw_deg: float) -> Array:
+    """The base-to-world transform (4, 4) of a placement at x, y, z [m], turned yaw_deg about
+    up: what a set file's ``[placement]`` x, y, z and yaw_deg mean."""
+    a = math.radians(yaw_deg)
+    T = np.eye(4)
+    T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                 [0.0, 0.0, 1.0]]
+    T[:3, 3] = (x, y, z)
+    return T
 
-    The placement is written as x, y, z and yaw_deg (``base2world`` must be a yaw about up),
-    and the layout's name when given.
-    """
-    R, t = base2world[:3, :3], base2world[:3, 3]
-    yaw = math.degrees(math.atan2(R[1, 0], R[0, 0]))
+
+def to_toml(x: float, y: float, z: float, yaw_deg: float, raw: dict[str, Any],
+            layout: str | None = None) -> str:
+    """A set file: ``raw``'s tables as they were, with ``[placement]`` at x, y, z [m] and
+    yaw_deg, written as those very numbers (read back, :func:`yaw_pose` gives the transform
+    bit for bit: a yaw recovered from the matrix, -136.88000000000002, gave another, and a
+    shot's speed can change with the last bit), and the layout's name when given."""
     lines = ["# camtraj set file (written by camtraj place)", "",
              "[placement]  # robot base in the converted world: metres, Z-up",
-             f"x = {float(t[0])!r}", f"y = {float(t[1])!r}", f"z = {float(t[2])!r}",
-             f"yaw_deg = {yaw!r}"]
+             f"x = {float(x)!r}", f"y = {float(y)!r}", f"z = {float(z)!r}",
+             f"yaw_deg = {float(yaw_deg)!r}"]
     if layout is not None:
         lines.append(f"layout = {_toml_value(layout)}")
     for name in ("floor", "search", "collision"):
@@ -289,7 +298,5 @@ def _placement(table: dict[str, Any], where: str) -> Array:
             raise InputError(msg)
         T[:3, :3] = R
     else:
-        a = math.radians(yaw)
-        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                     [0.0, 0.0, 1.0]]
+        T = yaw_pose(vals["x"], vals["y"], vals["z"], yaw)
     return T

@@ -89,11 +89,12 @@ def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> No
     T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
     T[:3, 3] = (-40.1, 56.3, 0.1)
     path = tmp_path / "placed.toml"
-    path.write_text(to_toml(T, sf.raw))
+    path.write_text(to_toml(-40.1, 56.3, 0.1, -71.25, sf.raw))
     data = tomllib.loads(path.read_text())  # plain TOML, as a person reads it
-    assert data["placement"]["yaw_deg"] == pytest.approx(-71.25)
+    assert data["placement"]["yaw_deg"] == -71.25  # the number, not one recovered from a matrix
     back = SetFile.read(path)
-    assert back.base2world is not None and np.allclose(back.base2world, T)
+    # the very transform place evaluated: a shot's speed can change with its last bit
+    assert back.base2world is not None and np.array_equal(back.base2world, T)
     assert back.prims == sf.prims and back.clearance_m == sf.clearance_m
     assert back.region is not None and sf.region is not None
     assert np.array_equal(back.region, sf.region) and back.yaw_range_deg == sf.yaw_range_deg
