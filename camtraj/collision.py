@@ -471,37 +471,91 @@ def check_samples(
     model: CollisionModel,
     q: Array,
     time_codes: Array,
-    frames: Array,
+    moments: Moments,
     base2world: Array,
     clearance: float,
 ) -> float:
     """Raise :class:`CollisionError` if any sample is closer than ``clearance``.
 
     Args:
-        q: (n, 8) joint vectors; time_codes, frames: (n,) the stage time and film frame of each.
+        q: (n, 8) joint vectors; time_codes: (n,) the stage time of each; moments: when each
+            is in the take.
 
     Returns:
         The smallest distance [m] (inf when nothing came near).
     """
     dist, worst = model.closest(q, time_codes, base2world, clearance)
     if worst is not None:
-        hit = sorted({int(f) for f in np.asarray(frames)[dist < clearance]})
-        raise collision_error(worst, int(frames[worst.sample]), clearance, hit)
+        raise collision_error(worst, moments, clearance, dist < clearance)
     return float(dist.min()) if dist.size else math.inf
 
 
-def collision_error(contact: Contact, frame: int, clearance: float,
-                    frames: list[int] | None = None) -> CollisionError:
-    """The error for a contact at film frame ``frame`` (``frames``: every frame that hits)."""
+@dataclass(frozen=True)
+class Moments:
+    """When each checked sample is: the film frame at or after it (the first frame in the
+    run-up, the last in the run-out), ``phase`` -1 in the run-up, 0 in the shot, 1 in the
+    run-out, and ``offset`` [s] before the first frame or after the last (0 in the shot)."""
+
+    frames: NDArray[np.int64]
+    phase: NDArray[np.int8]
+    offset: Array
+
+    @classmethod
+    def of(cls, t: Array, frame_times: Array, frame_numbers: NDArray[Any]) -> Moments:
+        """The moments of take times t (s), the frames at ``frame_times``."""
+        at = np.searchsorted(frame_times, t - 1e-12).clip(0, len(frame_numbers) - 1)
+        before, after = t < frame_times[0] - 1e-9, t > frame_times[-1] + 1e-9
+        phase = np.where(before, -1, np.where(after, 1, 0)).astype(np.int8)
+        offset = np.where(before, frame_times[0] - t, np.where(after, t - frame_times[-1], 0.0))
+        return cls(np.asarray(frame_numbers)[at].astype(np.int64), phase, offset)
+
+    def at(self, k: int) -> str:
+        """Sample k for a person: 'frame 12', 'the run-up, 0.35 s before frame 1'."""
+        frame, phase = int(self.frames[k]), int(self.phase[k])
+        if phase == 0:
+            return f"frame {frame}"
+        side = "run-up" if phase < 0 else "run-out"
+        return (f"the {side}, {float(self.offset[k]):.2f} s "
+                f"{'before' if phase < 0 else 'after'} frame {frame}")
+
+    def spans(self, hit: NDArray[np.bool_]) -> str:
+        """Where the samples ``hit`` are: the shot's frames, the run-up, the run-out."""
+        parts = []
+        if (hit & (self.phase < 0)).any():
+            on = self.offset[hit & (self.phase < 0)]
+            parts.append(f"the run-up {float(on.max()):.2f}-{float(on.min()):.2f} s before "
+                         f"frame {int(self.frames[0])}")
+        shot = sorted({int(f) for f in self.frames[hit & (self.phase == 0)]})
+        if shot:
+            parts.append(frame_ranges(shot))
+        if (hit & (self.phase > 0)).any():
+            on = self.offset[hit & (self.phase > 0)]
+            parts.append(f"the run-out {float(on.min()):.2f}-{float(on.max()):.2f} s after "
+                         f"frame {int(self.frames[-1])}")
+        return ", ".join(parts)
+
+
+def collision_error(contact: Contact, moments: Moments, clearance: float,
+                    hit: NDArray[np.bool_] | None = None) -> CollisionError:
+    """The error for a contact at sample ``contact.sample`` of ``moments`` (``hit``: every
+    sample that is too close). A contact in the run-up or run-out says so, with its time: the
+    film frame it is attached to is clear (a crew scrubbing that frame sees nothing)."""
     if contact.distance < 0:
         what = f"goes {100 * -contact.distance:.1f} cm into {contact.prim}"
     else:
         what = f"passes {100 * contact.distance:.1f} cm from {contact.prim}"
-    also = f" ({frame_ranges(frames)} too close)" if frames and frames != [frame] else ""
-    msg = (f"frame {frame}: the robot's {contact.link} {what} (clearance "
+    k = contact.sample
+    here = moments.at(k)
+    also = ""
+    if hit is not None and hit.sum() > 1:
+        spans = moments.spans(hit)
+        if spans != here:
+            also = f" ({spans} too close)"
+    msg = (f"{here}: the robot's {contact.link} {what} (clearance "
            f"{100 * clearance:.1f} cm){also}; move the robot or the set piece")
-    return CollisionError(msg, frame=frame, link=contact.link, prim=contact.prim,
-                          distance=contact.distance, clearance=clearance)
+    return CollisionError(msg, frame=int(moments.frames[k]), link=contact.link,
+                          prim=contact.prim, distance=contact.distance, clearance=clearance,
+                          phase=("run-up", "shot", "run-out")[int(moments.phase[k]) + 1])
 
 
 def take_samples(robot: Robot, q: Array, frame_samples: NDArray[Any],
@@ -547,6 +601,5 @@ def check_take(
     idx = take_samples(robot, q, take.frame_samples)
     t = take.t[idx]
     tcs = sample_times(t, take.frame_times, shot_time_codes)
-    # the film frame at or after each sample (the run-up reports the first frame)
-    at = np.searchsorted(take.frame_times, t - 1e-12).clip(0, len(take.frame_numbers) - 1)
-    return check_samples(model, q[idx], tcs, take.frame_numbers[at], base2world, clearance)
+    moments = Moments.of(t, take.frame_times, take.frame_numbers)
+    return check_samples(model, q[idx], tcs, moments, base2world, clearance)

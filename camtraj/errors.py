@@ -121,17 +121,20 @@ class CollisionError(InfeasibleError):
     """The robot comes closer to an obstacle of the set than the clearance allows.
 
     Attributes:
-        frame: Film frame number at (or after) the contact.
+        frame: Film frame number at (or after) the contact (the first frame in the run-up,
+            the last in the run-out).
         link: The robot part (e.g. ``"forearm (link5)"``).
         prim: Prim path of the obstacle.
         distance: Signed distance [m] (negative: penetration depth).
         clearance: The required distance [m].
+        phase: ``"run-up"``, ``"shot"`` or ``"run-out"``: where in the take.
     """
 
     def __init__(self, message: str, *, frame: int, link: str, prim: str, distance: float,
-                 clearance: float) -> None:
+                 clearance: float, phase: str = "shot") -> None:
         super().__init__(message)
         self.frame = frame
+        self.phase = phase
         self.link = link
         self.prim = prim
         self.distance = distance

@@ -179,7 +179,7 @@ def _model(problem: Problem) -> Any:
 
 def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) -> Result:
     """Solve, time and collision-check one placement on every ``stride``-th frame."""
-    from camtraj.collision import collision_error, sample_times, take_samples
+    from camtraj.collision import Moments, collision_error, sample_times, take_samples
 
     robot = problem.robot
     base2world = yaw_pose(x, y, problem.base_z, yaw_deg)
@@ -219,16 +219,15 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
             joints = take.q[:, :len(JOINT_NAMES)]
             s = take_samples(robot, joints, take.frame_samples)
             q, tcs = joints[s], sample_times(take.t[s], take.frame_times, problem.time_codes)
-            at = np.searchsorted(take.frame_times, take.t[s] - 1e-12).clip(0, len(idx) - 1)
-            sample_frames = frames[at]
+            moments = Moments.of(take.t[s], take.frame_times, frames)
         else:
-            q, tcs, sample_frames = path.q, problem.time_codes[idx], frames
+            q, tcs = path.q, problem.time_codes[idx]
+            moments = Moments.of(times, times, frames)
         dist, worst = model.closest(q, tcs, base2world, problem.clearance)
         marg["obstacle_m"] = float(dist.min()) if math.isfinite(dist.min()) else math.inf
         if worst is not None:
             free = False
-            reason = str(collision_error(worst, int(sample_frames[worst.sample]),
-                                         problem.clearance))
+            reason = str(collision_error(worst, moments, problem.clearance))
     return Result(x, y, yaw_deg, full, 1.0, free, feasible, float(rep.max_speed),
                   _binding(rep.peak_use), marg, reason)
 

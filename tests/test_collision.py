@@ -180,3 +180,29 @@ def test_take_samples_hold_every_frame_and_more_where_it_moves(robot: Robot) -> 
     moved = np.abs(np.diff(q[idx, 0]))
     assert moved.max() <= 0.05 + 4.0 / 99
     assert np.count_nonzero(idx >= 100) >= 4.0 / 0.05 - 1
+
+
+def test_a_contact_in_the_run_up_or_run_out_is_named_there_not_at_a_frame() -> None:
+    """Samples before the first frame are the run-up and after the last the run-out: a
+    contact there says so, with its time from the frame (that frame itself is clear: a crew
+    scrubbing it in previs would see nothing); one in the shot names its frame."""
+    from camtraj.collision import Contact, Moments, collision_error
+
+    frame_times = np.array([0.5, 0.5 + 1 / 24, 0.5 + 2 / 24])  # frames 10-12 after a run-up
+    t = np.array([0.0, 0.25, 0.5, 0.52, 0.5 + 2 / 24, 0.8, 1.2])
+    moments = Moments.of(t, frame_times, np.array([10, 11, 12]))
+    assert moments.phase.tolist() == [-1, -1, 0, 0, 0, 1, 1]
+    assert moments.frames.tolist() == [10, 10, 10, 11, 12, 12, 12]
+    hit = np.array([False, False, False, False, True, True, True])
+    out = collision_error(Contact(6, -0.039, "elbow hub (elbow_axis)", "/beam"), moments, 0.0,
+                          hit)
+    msg = str(out)
+    assert msg.startswith("the run-out, 0.62 s after frame 12: the robot's elbow hub "
+                          "(elbow_axis) goes 3.9 cm into /beam"), msg
+    assert "(frames 12, the run-out 0.22-0.62 s after frame 12 too close)" in msg, msg
+    assert out.phase == "run-out" and out.frame == 12
+    up = collision_error(Contact(1, 0.01, "carriage (link1)", "/wall"), moments, 0.05)
+    assert str(up).startswith("the run-up, 0.25 s before frame 10: the robot's carriage"), up
+    assert up.phase == "run-up"
+    shot = collision_error(Contact(3, -0.02, "carriage (link1)", "/wall"), moments, 0.0)
+    assert str(shot).startswith("frame 11: the robot's carriage") and shot.phase == "shot"
