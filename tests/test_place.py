@@ -206,6 +206,19 @@ def test_check_reports_the_collision_with_frame_link_and_prim(wall: dict[str, Pa
     assert not (wall["dir"] / "x.mcap").exists()
 
 
+def test_check_report_of_a_collision_says_collision(wall: dict[str, Path]) -> None:
+    """The page check --report writes for a take that hits the set headlines the collision
+    (it said "The robot can do this shot as converted.", the page that is mailed to the DP)."""
+    page = wall["dir"] / "hit.html"
+    proc = run("check", wall["shot"], "--set-file", wall["check"], "--objective", "paper",
+               "--timing", "scale", "--report", page)
+    assert proc.returncode == 3, proc.stderr
+    html = page.read_text(encoding="utf-8")
+    assert "can do this shot" not in html
+    headline = html.split("class='status bad'>", 1)[1].split("</p>", 1)[0]
+    assert headline.startswith("COLLISION: frame ") and "/World/set/wall" in headline
+
+
 def wall_distances(robot: Robot, q: np.ndarray, base2world: np.ndarray, shot: Path) -> float:
     """Smallest coal distance between the robot's solids and the wall, read from the USD."""
     stage = Usd.Stage.Open(str(shot))

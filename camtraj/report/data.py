@@ -74,9 +74,9 @@ class ReportData:
     Attributes:
         shot: The shot file. camera: Its camera prim. robot: Robot name and source.
         status: ``"ok"``, ``"limits"`` (the shot's timing exceeds a limit),
-            ``"unreachable"`` (frames the robot cannot reach) or ``"lens_range"`` (the shot
-            asks the lens for more than its calibration covers). message: Why not (one
-            line).
+            ``"unreachable"`` (frames the robot cannot reach), ``"lens_range"`` (the shot
+            asks the lens for more than its calibration covers) or ``"collision"`` (a take
+            inside every limit that hits the set). message: Why not (one line).
         timing: Timing mode. speed_factor: Take duration of the shot / its own duration.
         servo_rate_hz: Servo rate. fps: Film frame rate.
         servo_step_ms: The shortest and longest servo step [ms] (they differ in an optimal
@@ -140,6 +140,11 @@ class ReportData:
     # "runup"/"runout" -> axis -> quantity -> fraction of the limit
     edges: dict[str, dict[str, dict[str, float]]] | None = None
     servo_step_ms: tuple[float, float] | None = None
+
+    @property
+    def has_take(self) -> bool:
+        """Whether the data holds a take (inside every limit, with run-up and run-out)."""
+        return self.status in ("ok", "collision") and self.samples is not None
 
     def limit(self, quantity: str) -> Array:
         """The symmetric limit of velocity, acceleration or jerk, shape (8,)."""
@@ -285,7 +290,9 @@ def from_analysis(
         samples = _reduce(take.t, take.q, take.qd, take.qdd, take.qddd, take.frame_times,
                           (float(take.shot_start), float(take.shot_end)), *bounds)
         data = ReportData(
-            **common, status="ok", message="", timing=take.mode,
+            # a take inside every limit fails only where it hits the set (collision.check_take)
+            **common, status="ok" if error is None else "collision",
+            message="" if error is None else str(error), timing=take.mode,
             speed_factor=float(take.speed_factor), servo_rate_hz=float(take.rate),
             servo_step_ms=take.servo_steps_ms, max_speed=float(take.report.max_speed),
             samples=samples,

@@ -89,7 +89,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
                      f"{frame_rate(data.fps * data.max_speed)} fps)"))
     elif data.status not in ("unreachable", "lens_range"):
         rows.append(("maximum feasible speed", "not recorded in this file"))
-    if data.status == "ok" and s is not None:
+    if data.has_take and s is not None:
         rows.append(("run-up / run-out",
                      f"{seconds(data.shot_start - s.start)} s / "
                      f"{seconds(s.end - data.shot_end)} s"))
@@ -109,7 +109,7 @@ def margins(data: ReportData) -> list[dict[str, Any]]:
     rows = []
     for i, name in enumerate(data.joint_names):
         scale = math.degrees(1.0) if data.revolute[i] else 1.0
-        ok = data.status == "ok"
+        ok = data.has_take
         rows.append({
             "axis": name, "unit": "deg" if data.revolute[i] else "m",
             **{qn: float(s.shot_peak[k, i]) for k, qn in enumerate(QUANTITIES)},
@@ -176,6 +176,8 @@ def render_html(data: ReportData) -> str:
     elif data.status == "limits":
         status = (f"<p class='status bad'>NOT POSSIBLE with --timing {_e(data.timing)}: "
                   f"{len(data.violations)} limit(s) exceeded.</p>")
+    elif data.status == "collision":
+        status = f"<p class='status bad'>COLLISION: {_e(data.message)}</p>"
     elif data.status == "lens_range":
         status = f"<p class='status bad'>OUTSIDE THE LENS'S RANGE: {_e(data.message)}</p>"
     else:
