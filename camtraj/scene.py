@@ -299,7 +299,10 @@ def _no_repeats(shots: Sequence[SceneShot]) -> None:
     """
     seen: dict[tuple[int, int, str | None, tuple[int, int] | None], int] = {}
     for k, s in enumerate(shots):
-        st = os.stat(s.path)
+        try:
+            st = os.stat(s.path)
+        except (OSError, ValueError):  # a missing shot: the reader says so, as bad input
+            continue
         key = (st.st_dev, st.st_ino, s.camera, s.frames)
         if key in seen:
             first = seen[key]

@@ -256,6 +256,12 @@ def _corpus(base: Path, good_mcap: Path) -> tuple[dict[str, Case], Path]:
     add("place_scene_a_fifo_as_a_shot_with_o", ["place", good, d / "pipe.usda", "-o", "p.toml"],
         "named pipe")
     add("place_scene_file_fifo", ["place", "--scene", d / "pipe.toml"], "named pipe")
+    # a shot that does not exist is bad input (exit 2), as a folder or a pipe is (it was 1)
+    (d / "missing.toml").write_text('[[shot]]\npath = "nope.usda"\n', encoding="utf-8")
+    add("place_scene_file_names_a_missing_shot", ["place", "--scene", d / "missing.toml"],
+        "nope.usda", "no such file")
+    add("place_scene_a_missing_shot", ["place", good, d / "nope.usda"], "nope.usda",
+        "no such file")
     add("place_scene_shots_of_different_units",
         ["place", good, SHOTS / "blender_crane_up.usda"], "units")
     add("place_scene_and_shots", ["place", good, "--scene", d / "scene.toml"], "scene")
