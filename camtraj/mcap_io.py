@@ -1546,6 +1546,7 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
                 "count": int(counts.get(cid, 0)),
             }
         )
+    _check_topics(path, set(count_by_topic))  # as report and read_take: not a take is bad input
     metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
     take_md = metadata.get(METADATA_NAME, {})
     robot_md = metadata.get(ROBOT_METADATA_NAME)

@@ -660,6 +660,9 @@ def test_read_errors(tmp_path: Path) -> None:
         writer.finish()  # type: ignore[no-untyped-call]
     with pytest.raises(InputError, match=r"not a camtraj take: topic\(s\) missing: /robot_desc"):
         read_take(other)
+    # info too (it printed None for every field and exited 0)
+    with pytest.raises(InputError, match=r"not a camtraj take: topic\(s\) missing: /robot_desc"):
+        describe(other)
 
 
 def test_truncated_file_is_input_error(tmp_path: Path, written: Path) -> None:
