@@ -388,3 +388,50 @@ def test_a_signal_racing_the_switch_to_ignore_does_not_escape(
     finally:
         for s, h in saved.items():
             real(s, h)
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie left for an init that does not reap is not running)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_a_sigterm_to_the_group_of_place_leaves_no_process(
+    shots: dict[str, Path], tmp_path: Path
+) -> None:
+    """A farm cancelling a place task signals its whole process group: the command, its
+    worker fork server, the workers and the resource tracker all end. The workers, which
+    import the camtraj command as their parent's main module and so its signal handlers,
+    caught the SIGTERM as an interruption of the task at hand, handed it to the executor and
+    waited on for the next task, orphaned with the resource tracker, for good."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    script = tmp_path / "camtraj"  # the console script: its name installs the handlers
+    script.write_text("import sys\nfrom camtraj.__main__ import run\n"
+                      "if __name__ == '__main__':\n    sys.exit(run())\n")  # as pip writes it
+    proc = subprocess.Popen(
+        [sys.executable, str(script), "place", str(shots["minute"]), "--jobs", "2", "-q"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True)
+    start = time.monotonic()
+    below: set[int] = set()
+    try:
+        while len(below) < 4:  # the fork server, the resource tracker and two workers
+            assert proc.poll() is None, "place ended before its workers started"
+            assert time.monotonic() - start < TIMEOUT, "no workers started"
+            time.sleep(0.05)
+            below = _descendants(proc.pid)
+        time.sleep(0.5)  # into their first tasks
+        below |= _descendants(proc.pid)
+        os.killpg(proc.pid, signal.SIGTERM)
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 143, err
+    while any(_alive(pid) for pid in below):
+        left = [Path(f"/proc/{p}/cmdline").read_bytes()[:80] for p in below if _alive(p)]
+        assert time.monotonic() - start < 60.0 + TIMEOUT / 4, f"still running: {left}"
+        time.sleep(0.1)
