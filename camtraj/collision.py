@@ -76,6 +76,34 @@ class Obstacle:
         out: Array = self.poses[idx]
         return out
 
+    def top(self) -> float:
+        """The highest point of the obstacle [m, world up] over all its poses."""
+        if self.shape in ("convex", "mesh"):
+            local = self.vertices
+        elif self.shape == "box":
+            local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                              for sz in (-1, 1)]) * (0.5 * np.asarray(self.size))
+        elif self.shape == "sphere":
+            return float(np.max(self.poses[:, 2, 3]) + self.size[0])
+        else:  # cylinder, capsule, cone along z, centred: the higher end's rim (a capsule's
+            # cap; a cone's as a cylinder's, at least its top)
+            r, half = self.size[0], 0.5 * self.size[1]
+            up = np.abs(self.poses[:, 2, 2])  # the world up part of the shape's axis
+            rim = r if self.shape == "capsule" else r * np.sqrt(np.maximum(0.0, 1.0 - up * up))
+            return float(np.max(self.poses[:, 2, 3] + up * half + rim))
+        z = np.einsum("vk,mk->mv", local, self.poses[:, 2, :3]) + self.poses[:, 2, 3, None]
+        return float(z.max())
+
+
+GROUND_FRAMES = ("base_link", "link1", "rotate_axis")
+"""The robot's frames that never change height (the rail, the carriage on the track, the
+turret turning on it): their parts stand on the floor the robot stands on (place stands the
+base on the floor's height: the rail and carriage sit below it, the turret on it) and are
+not checked against an obstacle that lies wholly at or below the base, that floor given as
+a prim so that the arm and the camera are checked against it."""
+GROUND_TOL = 1e-3
+"""[m] How far above the base an obstacle's top may be and still count as the floor."""
+
 
 @dataclass(frozen=True)
 class Contact:
@@ -410,6 +438,7 @@ class CollisionModel:
                                       math.hypot(s.size[0], 0.5 * s.size[1])
                                       for s in self.solids])
         self.obstacle_geom = [_coal_geometry(ob) for ob in obstacles]
+        self.obstacle_top = [ob.top() for ob in obstacles]
 
     def link_name(self, i: int) -> str:
         s = self.solids[i]
@@ -443,6 +472,8 @@ class CollisionModel:
             return best, None
         solids = self.solid_poses(q, base2world)
         centres = solids[:, :, :3, 3]  # (n, k, 3)
+        base_z = float(base2world[2, 3])
+        ground = np.array([s.frame in GROUND_FRAMES for s in self.solids])
         worst: Contact | None = None
         req = coal.DistanceRequest()
         near = coal.CollisionRequest()
@@ -453,6 +484,8 @@ class CollisionModel:
             gap = (np.linalg.norm(centres - oc[:, None, :], axis=2) - self.robot_radius[None]
                    - ob.radius)
             geom = self.obstacle_geom[o]
+            if self.obstacle_top[o] <= base_z + GROUND_TOL:  # the floor under the track
+                gap[:, ground] = np.inf
             for i, j in zip(*np.nonzero(gap < clearance + NEAR), strict=True):
                 T1, T2 = _transform(solids[i, j]), _transform(poses[i])
                 if not coal.collide(self.robot_geom[j], T1, geom, T2, near,

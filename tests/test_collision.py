@@ -3,6 +3,7 @@ solids posed by the same frames as the URDF / tf."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import coal
@@ -152,7 +153,8 @@ def test_solids_hang_in_the_urdf_frames(robot: Robot) -> None:
 
 
 def test_robot_against_a_slab_under_the_carriage(robot: Robot) -> None:
-    """A box on the floor beside the carriage, 10 cm from it."""
+    """A box beside the carriage, 10 cm from it, rising 2.5 cm above the base (one wholly
+    below the base is the floor the track stands on, not checked against it)."""
     q = np.zeros((1, 8))
     carriage = next(s for s in robot_solids(robot) if s.name == "carriage")
     R = frame_poses(robot, q)["link1"][0, :3, :3]
@@ -160,7 +162,7 @@ def test_robot_against_a_slab_under_the_carriage(robot: Robot) -> None:
     slab = Obstacle("/slab", "box", (0.5, 0.2, 0.05), np.zeros((0, 3)),
                     np.zeros((0, 3), dtype=np.int64), np.array([1.0]),
                     np.array([[[1, 0, 0, robot.dh.r10], [0, 1, 0, y_edge + 0.2],
-                               [0, 0, 1, -0.05], [0, 0, 0, 1.0]]]), np.zeros(3), 0.3)
+                               [0, 0, 1, 0.0], [0, 0, 0, 1.0]]]), np.zeros(3), 0.3)
     model = CollisionModel(robot, [slab])
     dist, worst = model.closest(q, np.array([1.0]), np.eye(4), 0.05)
     assert worst is None and dist[0] == pytest.approx(0.1, abs=1e-6)
@@ -206,3 +208,47 @@ def test_a_contact_in_the_run_up_or_run_out_is_named_there_not_at_a_frame() -> N
     assert up.phase == "run-up"
     shot = collision_error(Contact(3, -0.02, "carriage (link1)", "/wall"), moments, 0.0)
     assert str(shot).startswith("frame 11: the robot's carriage") and shot.phase == "shot"
+
+
+def _lowest(model: CollisionModel, q: np.ndarray) -> dict[str, float]:
+    """Each robot part's lowest point [m] at joint vector q (base at the origin), by hand:
+    a box's lowest corner, a cylinder's lower rim."""
+    poses = model.solid_poses(q[None], np.eye(4))[0]
+    out = {}
+    for s, T in zip(model.solids, poses, strict=True):
+        if s.shape == "box":
+            corners = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)])
+            out[s.name] = float((T[:3, :3] @ (0.5 * corners * s.size).T)[2].min() + T[2, 3])
+        else:
+            r, up = s.size[0], abs(T[2, 2])
+            out[s.name] = T[2, 3] - up * 0.5 * s.size[1] - r * math.sqrt(max(0.0, 1 - up * up))
+    return out
+
+
+def test_the_floor_the_robot_stands_on_is_an_obstacle_for_the_arm_not_the_track(
+        robot: Robot) -> None:
+    """A floor slab whose top is at the base (place stands the base on the floor) catches the
+    arm and the camera going into it, not the rail, carriage and turret standing on it (every
+    placement collided with it: 'the carriage goes 10.0 cm into /World/set/floor'); a plinth
+    rising 5 cm above the base is an obstacle for them too."""
+    def slab(top: float) -> Obstacle:
+        T = np.eye(4)
+        T[:3, 3] = (4.0, 0.0, top - 0.05)
+        return Obstacle("/floor", "box", (30.0, 30.0, 0.1), np.zeros((0, 3)),
+                        np.zeros((0, 3), dtype=np.int64), np.array([1.0]), T[None],
+                        np.zeros(3), 15.1)
+
+    floor, plinth = CollisionModel(robot, [slab(0.0)]), CollisionModel(robot, [slab(0.05)])
+    ground = {"rail", "carriage", "turret"}
+    rng = np.random.default_rng(0)
+    qs = robot.lower + rng.random((200, 8)) * (robot.upper - robot.lower)
+    high = next(q for q in qs if min(v for k, v in _lowest(floor, q).items()
+                                     if k not in ground) > 0.1)
+    assert _lowest(floor, high)["carriage"] < -0.09  # it stands below the base
+    _, worst = floor.closest(high[None], np.ones(1), np.eye(4), 0.0)
+    assert worst is None
+    _, worst = plinth.closest(high[None], np.ones(1), np.eye(4), 0.0)
+    assert worst is not None and worst.link.split(" (")[0] in ground and worst.distance < 0
+    low = next(q for q in qs if min(_lowest(floor, q).values()) < -0.2)
+    _, worst = floor.closest(low[None], np.ones(1), np.eye(4), 0.0)
+    assert worst is not None and worst.link.split(" (")[0] not in ground and worst.distance < 0
