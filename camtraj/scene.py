@@ -235,14 +235,18 @@ def place_scene(
     everyone = tuple(range(len(shots)))
     runner = _Runner(tuple(problems), jobs, progress)
     try:
+        screened = [0]  # candidates of every search's and split test's screen
+
         def group_search(group: tuple[int, ...]) -> tuple[list[Layout], int, dict[str, Any]]:
-            return search(runner, group, sf, meters_per_unit=mpu, up_axis=up, top=1)
+            found = search(runner, group, sf, meters_per_unit=mpu, up_axis=up, top=1)
+            screened[0] += found[1]
+            return found
 
         layout: Layout | None = None
-        reason, screened = "", 0
+        reason = ""
         region: dict[str, Any] = {}
         try:
-            layouts, screened, region = group_search(everyone)
+            layouts, _, region = group_search(everyone)
             layout = layouts[0]
             if not layout.ok:
                 bad = layout.results[layout.limiting]
@@ -253,10 +257,11 @@ def place_scene(
         if layout is None or not layout.ok:
             def cheap(group: tuple[int, ...]) -> bool:
                 try:
-                    return bool(screen(runner.problems, group, sf, meters_per_unit=mpu,
-                                       up_axis=up).ok.any())
+                    scr = screen(runner.problems, group, sf, meters_per_unit=mpu, up_axis=up)
                 except PlacementError:
                     return False
+                screened[0] += len(scr.grid)
+                return bool(scr.ok.any())
 
             split = smallest_split(len(shots), cheap, lambda g: _best_ok(group_search, g),
                                    known={everyone: None})
@@ -269,7 +274,7 @@ def place_scene(
     finally:
         runner.close()
     return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,
-                       runner.count, screened, time.perf_counter() - start,
+                       runner.count, screened[0], time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
 
 

@@ -176,6 +176,7 @@ def test_a_scene_no_layout_serves_is_split_into_groups_that_work(
     assert not out.exists()
     r = json.loads(proc.stdout)
     assert r["status"] == "split" and r["layout"] == "wide"
+    assert r["screened"] > 0 and r["evaluated"] > 0  # the split's own screens count (it said 0)
     # no single layout: the far shot is farther from the others than the arm reaches across
     groups = {frozenset(Path(s).name for s in g["shots"]): g["placement"] for g in r["split"]}
     assert set(groups) == {frozenset({"left.usda", "ahead.usda"}), frozenset({"far.usda"})}
