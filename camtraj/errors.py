@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 
-from camtraj.shown import frame_span
+from camtraj.shown import frame_runs
 
 
 def one_line(text: str | os.PathLike[str]) -> str:
@@ -146,16 +146,16 @@ def _frame_ranges(frames: list[int]) -> str:
     if not frames:
         return "no frame numbers"
     frames = sorted(set(frames))
-    parts: list[str] = []
+    parts: list[tuple[int, int]] = []
     start = prev = frames[0]
     for f in frames[1:]:
         if f == prev + 1:
             prev = f
             continue
-        parts.append(frame_span(start, prev) if prev != start else f"{start}")
+        parts.append((start, prev))
         start = prev = f
-    parts.append(frame_span(start, prev) if prev != start else f"{start}")
-    return "frames " + ", ".join(parts)
+    parts.append((start, prev))
+    return frame_runs(parts)
 
 
 def frame_ranges(frames: list[int]) -> str:

@@ -9,10 +9,13 @@ speed rounds down (a speed said to fit does fit).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+import numbers
+from collections.abc import Callable, Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
+from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "frame_span", "percent",
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "frame_runs",
+           "frame_span", "percent",
            "scale_fit", "seconds", "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
@@ -26,11 +29,17 @@ def percent(x: float) -> str:
     return f"{100 * x:.0f}%" if x < 100.0 else ">9999%"
 
 
-def frame_span(first: object, last: object) -> str:
+def frame_span(first: object, last: object, text: Callable[[Any], str] = str) -> str:
     """Film frames first to last: '1001-1096', or '-24 to 23' when a frame is negative (a
-    hyphen would read as a minus sign: '-30--1')."""
-    negative = any(isinstance(f, int | float) and f < 0 for f in (first, last))
-    return f"{first} to {last}" if negative else f"{first}-{last}"
+    hyphen would read as a minus sign: '-30--1'); each frame written by ``text``."""
+    negative = any(isinstance(f, numbers.Real) and f < 0 for f in (first, last))
+    a, b = text(first), text(last)
+    return f"{a} to {b}" if negative else f"{a}-{b}"
+
+
+def frame_runs(runs: Iterable[tuple[int, int]]) -> str:
+    """Runs of film frames (first, last): 'frames 12-19, 40' ('frames -3 to -1, 4')."""
+    return "frames " + ", ".join(frame_span(a, b) if b != a else f"{a}" for a, b in runs)
 
 
 def seconds(x: float, digits: int = 2) -> str:

@@ -631,7 +631,7 @@ def _film_frames(
             )
             raise ShotFileError(msg)
     count = last - first + 1
-    span_text = f"{_big(first)}-{_big(last)}"
+    span_text = frame_span(first, last, _big)
     if count > MAX_FRAMES:
         msg = (
             f"{path}: frames {span_text} are {_big(count)} film frames; camtraj reads at most "

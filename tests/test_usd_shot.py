@@ -306,6 +306,14 @@ def test_negative_frames_are_written_as_a_to_b_not_with_a_double_hyphen(tmp_path
     assert "film frames -24 to 23" in str(info.value)
     assert "--" not in str(info.value)
     assert read_shot(path, frames=(-3, 2)).frames.tolist() == [-3, -2, -1, 0, 1, 2]
+    # every printed range: limit violations (check, the report), numpy's integers too
+    from camtraj.shown import frame_runs, frame_span
+    from camtraj.timing import LimitViolation
+
+    v = LimitViolation("pan", "jerk", 9.0, 1.0, 9.0, ((-30, -25), (-3, -3), (4, 9)), True)
+    assert v.frame_text == "frames -30 to -25, -3, 4-9"
+    assert frame_span(np.int64(-3), np.int64(-1)) == "-3 to -1"
+    assert frame_runs([(np.int64(1001), np.int64(1096))]) == "frames 1001-1096"
 
 
 def test_static_camera_without_any_range_is_an_error(tmp_path: Path) -> None:

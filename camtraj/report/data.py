@@ -33,6 +33,7 @@ from camtraj.errors import (
     UnreachableFramesError,
 )
 from camtraj.report.samples import QUANTITIES, Samples, in_blocks, reduce_samples
+from camtraj.shown import frame_runs
 
 if TYPE_CHECKING:
     from camtraj.analysis import Analysis
@@ -64,7 +65,7 @@ class Violation:
 
     @property
     def frame_text(self) -> str:
-        return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in self.frames)
+        return frame_runs(self.frames)
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,7 +205,7 @@ def _runs(numbers: list[int], indices: list[int]) -> tuple[tuple[int, int], ...]
 
 
 def _frames_text(frames: tuple[tuple[int, int], ...]) -> str:
-    return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in frames)
+    return frame_runs(frames)
 
 
 def track_ends(link2base: Array, lower: float, upper: float) -> Array:

@@ -19,6 +19,7 @@ from camtraj.shown import (
     EDGE_QUANTITIES,
     edge_use,
     frame_rate,
+    frame_span,
     percent,
     seconds,
     servo,
@@ -70,7 +71,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
     rows = [
         ("shot", data.shot),
         ("camera", data.camera),
-        ("frames", f"{fn[0]}-{fn[-1]} ({fn.size} frames at {data.fps:g} fps)"),
+        ("frames", f"{frame_span(fn[0], fn[-1])} ({fn.size} frames at {data.fps:g} fps)"),
         ("robot", data.robot),
         ("placement", data.placement),
         ("timing mode", data.timing),

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from camtraj.errors import LimitError
 from camtraj.robot import JOINT_KINDS, JOINT_NAMES
+from camtraj.shown import frame_runs
 from camtraj.timing.path import Samples, runs
 
 Array = NDArray[np.float64]
@@ -149,7 +150,7 @@ class LimitViolation:
     @property
     def frame_text(self) -> str:
         """The frames as text, e.g. ``"frames 12-19, 40"``."""
-        return "frames " + ", ".join(f"{a}-{b}" if b != a else f"{a}" for a, b in self.frames)
+        return frame_runs(self.frames)
 
     def describe(self) -> str:
         """One line for people: ``rotate velocity 143 deg/s exceeds 90.0 deg/s on frames 1-9``."""
