@@ -1546,8 +1546,11 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
                 "count": int(counts.get(cid, 0)),
             }
         )
-    _check_topics(path, set(count_by_topic))  # as report and read_take: not a take is bad input
     metadata = {rec.name: dict(rec.metadata) for rec in reader.iter_metadata()}
+    if METADATA_NAME not in metadata:  # every camtraj take has it, the oldest too
+        msg = (f"{path}: not a camtraj take: no {METADATA_NAME!r} metadata record (topics: "
+               f"{', '.join(sorted(count_by_topic)) or 'none'})")
+        raise InputError(msg)
     take_md = metadata.get(METADATA_NAME, {})
     robot_md = metadata.get(ROBOT_METADATA_NAME)
     limits = {key: json.loads(value) for key, value in robot_md.items()} if robot_md else None
