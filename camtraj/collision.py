@@ -97,12 +97,13 @@ class Obstacle:
 
 GROUND_FRAMES = ("base_link", "link1", "rotate_axis")
 """The robot's frames that never change height (the rail, the carriage on the track, the
-turret turning on it): their parts stand on the floor the robot stands on (place stands the
-base on the floor's height: the rail and carriage sit below it, the turret on it) and are
-not checked against an obstacle that lies wholly at or below the base, that floor given as
-a prim so that the arm and the camera are checked against it."""
+turret turning on it): their parts stand on the floor (place stands the base on the set
+file's floor height: the rail and carriage sit below it, the turret on it) and are not
+checked against an obstacle that lies wholly at or below the floor, the floor itself given
+as a prim so that the arm and the camera are checked against it. Anything rising above the
+floor (a cable ramp under the carriage) is checked against them too."""
 GROUND_TOL = 1e-3
-"""[m] How far above the base an obstacle's top may be and still count as the floor."""
+"""[m] How far above the floor an obstacle's top may be and still count as the floor."""
 
 
 @dataclass(frozen=True)
@@ -428,7 +429,11 @@ def _transform(T: Array) -> Any:
 class CollisionModel:
     """The robot's solids and the obstacles as coal objects, ready for distance queries."""
 
-    def __init__(self, robot: Robot, obstacles: list[Obstacle]) -> None:
+    def __init__(self, robot: Robot, obstacles: list[Obstacle],
+                 floor_z: float | None = None) -> None:
+        """``floor_z``: the floor's height in the converted world [m] (the set file's), where
+        the rail, carriage and turret are not checked against what lies below it (None:
+        every part against every obstacle)."""
         self.robot = robot
         self.solids = robot_solids(robot)
         self.obstacles = obstacles
@@ -438,7 +443,8 @@ class CollisionModel:
                                       math.hypot(s.size[0], 0.5 * s.size[1])
                                       for s in self.solids])
         self.obstacle_geom = [_coal_geometry(ob) for ob in obstacles]
-        self.obstacle_top = [ob.top() for ob in obstacles]
+        self.floor = [floor_z is not None and ob.top() <= floor_z + GROUND_TOL
+                      for ob in obstacles]
 
     def link_name(self, i: int) -> str:
         s = self.solids[i]
@@ -472,7 +478,6 @@ class CollisionModel:
             return best, None
         solids = self.solid_poses(q, base2world)
         centres = solids[:, :, :3, 3]  # (n, k, 3)
-        base_z = float(base2world[2, 3])
         ground = np.array([s.frame in GROUND_FRAMES for s in self.solids])
         worst: Contact | None = None
         req = coal.DistanceRequest()
@@ -484,7 +489,7 @@ class CollisionModel:
             gap = (np.linalg.norm(centres - oc[:, None, :], axis=2) - self.robot_radius[None]
                    - ob.radius)
             geom = self.obstacle_geom[o]
-            if self.obstacle_top[o] <= base_z + GROUND_TOL:  # the floor under the track
+            if self.floor[o]:  # the floor the track stands on
                 gap[:, ground] = np.inf
             for i, j in zip(*np.nonzero(gap < clearance + NEAR), strict=True):
                 T1, T2 = _transform(solids[i, j]), _transform(poses[i])
@@ -617,19 +622,21 @@ def check_take(
     shot_time_codes: Array,
     patterns: tuple[str, ...],
     clearance: float,
+    floor_z: float | None = None,
 ) -> float:
     """Check a timed take against the set's obstacles; the smallest distance [m].
 
     Args:
         take: A :class:`camtraj.timing.Take` (its servo samples are checked).
         shot_time_codes: (n,) stage time code of every film frame.
+        floor_z: The floor's height [m] (see :class:`CollisionModel`).
 
     Raises:
         CollisionError: Closer than ``clearance`` somewhere (names frame, link, prim, depth).
         InputError: A pattern matches nothing.
     """
     obstacles = read_obstacles(shot_path, patterns, shot_time_codes)
-    model = CollisionModel(robot, obstacles)
+    model = CollisionModel(robot, obstacles, floor_z)
     q = take.q[:, :len(robot.joint_names)]  # the joints (a lens's motors move no link)
     idx = take_samples(robot, q, take.frame_samples)
     t = take.t[idx]

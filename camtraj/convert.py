@@ -250,7 +250,8 @@ def analyse(
         clearance = set_file.clearance_m if options.clearance is None else options.clearance
         with _stage(timings, "collision"):
             closest = check_take(shot_path, robot, placement.base2world, analysis.take,
-                                 shot.time_codes, set_file.prims, clearance)
+                                 shot.time_codes, set_file.prims, clearance,
+                                 floor_z=set_file.floor_height * shot.meters_per_unit)
         analysis.collision = {"prims": list(set_file.prims), "clearance_m": clearance,
                               "closest_m": closest if math.isfinite(closest) else None,
                               "measured_within_m": clearance + NEAR}
@@ -449,12 +450,19 @@ def hold_note(held: NDArray[np.bool_], frames: NDArray[np.int_],
     ends = np.flatnonzero(held & ~np.concatenate([held[1:], [False]])) + 1  # last frames
     edges = [(int(frames[k]), "stops dead into") for k in starts if k > 0]
     edges += [(int(frames[k]), "starts out of") for k in ends if k < n - 1]
-    # a run of frames over a limit that lies within HOLD_EDGE_FRAMES of the edge (a move
-    # too fast for an axis between two holds, a whip pan, is over along the whole move)
+    # every run of frames over a limit lies within HOLD_EDGE_FRAMES of an edge, and no
+    # velocity is over: a move too fast for an axis between two holds (a whip pan) is over
+    # along the whole move, or in speed
+    if any(v.quantity == "velocity" for v in violations):
+        return None
     runs = [r for v in violations if v.quantity in ("acceleration", "jerk") for r in v.frames]
-    near = sorted({(f, what) for f, what in edges
-                   if any(f - HOLD_EDGE_FRAMES <= a and b <= f + HOLD_EDGE_FRAMES
-                          for a, b in runs)})
+
+    def at_edge(run: tuple[int, int], f: int) -> bool:
+        return f - HOLD_EDGE_FRAMES <= run[0] and run[1] <= f + HOLD_EDGE_FRAMES
+
+    if not runs or not all(any(at_edge(r, f) for f, _ in edges) for r in runs):
+        return None
+    near = sorted({(f, what) for f, what in edges if any(at_edge(r, f) for r in runs)})
     if not near:
         return None
     said = " and ".join(f"{what} a hold at frame {f}" for f, what in near[:4])

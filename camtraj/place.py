@@ -185,7 +185,8 @@ def _model(problem: Problem) -> Any:
 
     models = _WORKER.setdefault("models", {})
     if id(problem) not in models:
-        models[id(problem)] = (problem, CollisionModel(problem.robot, list(problem.obstacles)))
+        models[id(problem)] = (problem, CollisionModel(problem.robot, list(problem.obstacles),
+                                                       problem.base_z))  # the floor's height
     return models[id(problem)][1]
 
 
@@ -632,7 +633,9 @@ def current_placement(set_file: SetFile) -> tuple[float, float, float]:
     m = set_file.base2world
     if m is None:
         return 0.0, 0.0, 0.0
-    return float(m[0, 3]), float(m[1, 3]), math.degrees(math.atan2(m[1, 0], m[0, 0]))
+    # to the nanodegree: a file's yaw_deg = -136.88 back as -136.88, not -136.88000000000002
+    # (a shot's speed can change with the transform's last bit)
+    return float(m[0, 3]), float(m[1, 3]), round(math.degrees(math.atan2(m[1, 0], m[0, 0])), 9)
 
 
 def _where(lay: Layout) -> tuple[float, float, float]:

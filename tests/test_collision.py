@@ -153,8 +153,7 @@ def test_solids_hang_in_the_urdf_frames(robot: Robot) -> None:
 
 
 def test_robot_against_a_slab_under_the_carriage(robot: Robot) -> None:
-    """A box beside the carriage, 10 cm from it, rising 2.5 cm above the base (one wholly
-    below the base is the floor the track stands on, not checked against it)."""
+    """A box on the floor beside the carriage, 10 cm from it."""
     q = np.zeros((1, 8))
     carriage = next(s for s in robot_solids(robot) if s.name == "carriage")
     R = frame_poses(robot, q)["link1"][0, :3, :3]
@@ -162,7 +161,7 @@ def test_robot_against_a_slab_under_the_carriage(robot: Robot) -> None:
     slab = Obstacle("/slab", "box", (0.5, 0.2, 0.05), np.zeros((0, 3)),
                     np.zeros((0, 3), dtype=np.int64), np.array([1.0]),
                     np.array([[[1, 0, 0, robot.dh.r10], [0, 1, 0, y_edge + 0.2],
-                               [0, 0, 1, 0.0], [0, 0, 0, 1.0]]]), np.zeros(3), 0.3)
+                               [0, 0, 1, -0.05], [0, 0, 0, 1.0]]]), np.zeros(3), 0.3)
     model = CollisionModel(robot, [slab])
     dist, worst = model.closest(q, np.array([1.0]), np.eye(4), 0.05)
     assert worst is None and dist[0] == pytest.approx(0.1, abs=1e-6)
@@ -227,10 +226,11 @@ def _lowest(model: CollisionModel, q: np.ndarray) -> dict[str, float]:
 
 def test_the_floor_the_robot_stands_on_is_an_obstacle_for_the_arm_not_the_track(
         robot: Robot) -> None:
-    """A floor slab whose top is at the base (place stands the base on the floor) catches the
-    arm and the camera going into it, not the rail, carriage and turret standing on it (every
-    placement collided with it: 'the carriage goes 10.0 cm into /World/set/floor'); a plinth
-    rising 5 cm above the base is an obstacle for them too."""
+    """A floor slab whose top is the set file's floor height (place stands the base on it)
+    catches the arm and the camera going into it, not the rail, carriage and turret standing
+    on it (every placement collided with it: 'the carriage goes 10.0 cm into
+    /World/set/floor'); a plinth rising 5 cm above the floor is an obstacle for them too, and
+    so is a cable ramp under the carriage of a rail standing on the floor."""
     def slab(top: float) -> Obstacle:
         T = np.eye(4)
         T[:3, 3] = (4.0, 0.0, top - 0.05)
@@ -238,7 +238,8 @@ def test_the_floor_the_robot_stands_on_is_an_obstacle_for_the_arm_not_the_track(
                         np.zeros((0, 3), dtype=np.int64), np.array([1.0]), T[None],
                         np.zeros(3), 15.1)
 
-    floor, plinth = CollisionModel(robot, [slab(0.0)]), CollisionModel(robot, [slab(0.05)])
+    floor = CollisionModel(robot, [slab(0.0)], floor_z=0.0)
+    plinth = CollisionModel(robot, [slab(0.05)], floor_z=0.0)
     ground = {"rail", "carriage", "turret"}
     rng = np.random.default_rng(0)
     qs = robot.lower + rng.random((200, 8)) * (robot.upper - robot.lower)
@@ -249,6 +250,15 @@ def test_the_floor_the_robot_stands_on_is_an_obstacle_for_the_arm_not_the_track(
     assert worst is None
     _, worst = plinth.closest(high[None], np.ones(1), np.eye(4), 0.0)
     assert worst is not None and worst.link.split(" (")[0] in ground and worst.distance < 0
+    # the rail standing on the floor (the base 18 cm up): a 15 cm cable ramp under the
+    # carriage is no floor, and the carriage is checked against it
+    ramp = CollisionModel(robot, [slab(0.15)], floor_z=0.0)
+    up = np.eye(4)
+    up[2, 3] = 0.18
+    _, worst = ramp.closest(high[None], np.ones(1), up, 0.0)
+    assert worst is not None and worst.link.split(" (")[0] in ground and worst.distance < 0
+    _, worst = floor.closest(high[None], np.ones(1), up, 0.0)
+    assert worst is None
     low = next(q for q in qs if min(_lowest(floor, q).values()) < -0.2)
     _, worst = floor.closest(low[None], np.ones(1), np.eye(4), 0.0)
     assert worst is not None and worst.link.split(" (")[0] not in ground and worst.distance < 0

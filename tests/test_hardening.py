@@ -641,6 +641,29 @@ def test_a_move_that_stops_dead_into_a_hold_is_named_and_an_eased_one_fits(
     assert smooth.take is not None and smooth.take.report.max_speed >= 1.0
 
 
+@pytest.mark.parametrize("frames", [3, 6])
+def test_a_pan_too_fast_between_two_holds_gets_no_hold_note(tmp_path: Path,
+                                                            frames: int) -> None:
+    """A 0.5 rad pan eased to zero acceleration at both ends (smootherstep) over 3 or 6
+    frames between two holds fails on limits because it is too fast, not because of how it
+    meets the holds: no hold note (a reviewer's cases; the first rule named both edges)."""
+    from camtraj.convert import analyse
+    from camtraj.options import ConvertOptions
+    from camtraj.timing import TimingLimitError
+    from tests.shots import write_shot
+
+    robot = Robot.default()
+    look = robot.camera_pose(np.zeros(8))[:3, :3]
+    out = np.tile(np.eye(4), (48, 1, 1))
+    for i, f in enumerate(range(1, 49)):
+        u = min(max((f - 20) / frames, 0.0), 1.0)
+        out[i, :3, :3] = rot_z(0.5 * u**3 * (10 - 15 * u + 6 * u * u)) @ look
+        out[i, :3, 3] = (4.5, 0.0, 0.9)
+    with pytest.raises(TimingLimitError) as info:
+        analyse(write_shot(tmp_path / "pan.usda", out), ConvertOptions())
+    assert not [n for n in getattr(info.value, "__notes__", []) if "hold" in n]
+
+
 def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
     """90 deg of pan over 6 frames (eased) is a move; 180 deg in one frame between still
     frames is a jump, named in degrees."""

@@ -85,13 +85,13 @@ def test_errors_are_one_line_naming_file_and_key(text: str, words: list[str]) ->
 def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> None:
     sf = SetFile.parse(FULL, "s.toml")
     T = np.eye(4)
-    a = math.radians(-71.25)
+    a = math.radians(-136.88)  # atan2 of the matrix gives back -136.88000000000002
     T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
     T[:3, 3] = (-40.1, 56.3, 0.1)
     path = tmp_path / "placed.toml"
-    path.write_text(to_toml(-40.1, 56.3, 0.1, -71.25, sf.raw))
+    path.write_text(to_toml(-40.1, 56.3, 0.1, -136.88, sf.raw))
     data = tomllib.loads(path.read_text())  # plain TOML, as a person reads it
-    assert data["placement"]["yaw_deg"] == -71.25  # the number, not one recovered from a matrix
+    assert data["placement"]["yaw_deg"] == -136.88  # the number, not one recovered from a matrix
     back = SetFile.read(path)
     # the very transform place evaluated: a shot's speed can change with its last bit
     assert back.base2world is not None and np.array_equal(back.base2world, T)
