@@ -328,8 +328,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
         result = _limit_report(shot, exc, options)
     except CollisionError as exc:
         result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
-                  "link": exc.link, "prim": exc.prim, "distance_m": exc.distance,
-                  "clearance_m": exc.clearance}
+                  "phase": exc.phase, "link": exc.link, "prim": exc.prim,
+                  "distance_m": exc.distance, "clearance_m": exc.clearance}
     except LensRangeError as exc:
         result = {"status": "lens_range", "shot": shot, "message": str(exc)}
     except CamtrajError as exc:

@@ -198,6 +198,7 @@ def test_check_reports_the_collision_with_frame_link_and_prim(wall: dict[str, Pa
     assert proc.returncode == 3, proc.stderr
     r = json.loads(proc.stdout)
     assert r["status"] == "collision" and r["prim"] == "/World/set/wall"
+    assert r["phase"] in ("run-up", "shot", "run-out")  # where in the take
     assert 1 <= r["frame"] <= 48 and "link" in r["link"] and r["distance_m"] < 0
     assert f"frame {r['frame']}" in r["message"] and "/World/set/wall" in r["message"]
     proc = run("convert", wall["shot"], "--set-file", wall["check"], "-o",
@@ -265,6 +266,7 @@ def test_place_with_the_wall_as_obstacle_keeps_the_clearance(
     assert proc.returncode == 3, proc.stderr
     r = json.loads(proc.stdout)
     assert r["status"] == "collision" and r["prim"] == "/World/set/wall"
+    assert r["phase"] in ("run-up", "shot", "run-out")  # where in the take
     assert r["distance_m"] == pytest.approx(d, abs=0.02)
 
 
