@@ -399,14 +399,16 @@ def _alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
-def test_a_sigterm_to_the_group_of_place_leaves_no_process(
-    shots: dict[str, Path], tmp_path: Path
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_group_of_place_leaves_no_process(
+    shots: dict[str, Path], tmp_path: Path, name: str
 ) -> None:
-    """A farm cancelling a place task signals its whole process group: the command, its
-    worker fork server, the workers and the resource tracker all end. The workers, which
-    import the camtraj command as their parent's main module and so its signal handlers,
-    caught the SIGTERM as an interruption of the task at hand, handed it to the executor and
-    waited on for the next task, orphaned with the resource tracker, for good."""
+    """A farm cancelling a place task (SIGTERM), or Ctrl-C in a terminal (SIGINT), signals
+    its whole process group: the command, its worker fork server, the workers and the
+    resource tracker all end. The workers, which import the camtraj command as their
+    parent's main module and so its signal handlers, caught the SIGTERM as an interruption of
+    the task at hand, handed it to the executor and waited on for the next task, orphaned
+    with the resource tracker, for good."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     script = tmp_path / "camtraj"  # the console script: its name installs the handlers
     script.write_text("import sys\nfrom camtraj.__main__ import run\n"
@@ -424,13 +426,14 @@ def test_a_sigterm_to_the_group_of_place_leaves_no_process(
             below = _descendants(proc.pid)
         time.sleep(0.5)  # into their first tasks
         below |= _descendants(proc.pid)
-        os.killpg(proc.pid, signal.SIGTERM)
+        os.killpg(proc.pid, SIGNALS[name])
         err = proc.communicate(timeout=TIMEOUT)[1].decode()
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-    assert proc.returncode == 143, err
+    assert proc.returncode == 128 + SIGNALS[name], err
+    assert err.splitlines() == [f"ERROR: stopped by {name}"], err
     while any(_alive(pid) for pid in below):
         left = [Path(f"/proc/{p}/cmdline").read_bytes()[:80] for p in below if _alive(p)]
         assert time.monotonic() - start < 60.0 + TIMEOUT / 4, f"still running: {left}"
