@@ -445,6 +445,7 @@ class CollisionModel:
         self.obstacle_geom = [_coal_geometry(ob) for ob in obstacles]
         self.floor = [floor_z is not None and ob.top() <= floor_z + GROUND_TOL
                       for ob in obstacles]
+        self.ground = np.array([s.frame in GROUND_FRAMES for s in self.solids])
 
     def link_name(self, i: int) -> str:
         s = self.solids[i]
@@ -478,7 +479,6 @@ class CollisionModel:
             return best, None
         solids = self.solid_poses(q, base2world)
         centres = solids[:, :, :3, 3]  # (n, k, 3)
-        ground = np.array([s.frame in GROUND_FRAMES for s in self.solids])
         worst: Contact | None = None
         req = coal.DistanceRequest()
         near = coal.CollisionRequest()
@@ -490,7 +490,7 @@ class CollisionModel:
                    - ob.radius)
             geom = self.obstacle_geom[o]
             if self.floor[o]:  # the floor the track stands on
-                gap[:, ground] = np.inf
+                gap[:, self.ground] = np.inf
             for i, j in zip(*np.nonzero(gap < clearance + NEAR), strict=True):
                 T1, T2 = _transform(solids[i, j]), _transform(poses[i])
                 if not coal.collide(self.robot_geom[j], T1, geom, T2, near,
@@ -559,17 +559,17 @@ class Moments:
     def spans(self, hit: NDArray[np.bool_]) -> str:
         """Where the samples ``hit`` are: the shot's frames, the run-up, the run-out."""
         parts = []
-        if (hit & (self.phase < 0)).any():
-            on = self.offset[hit & (self.phase < 0)]
-            parts.append(f"the run-up {float(on.max()):.2f}-{float(on.min()):.2f} s before "
-                         f"frame {int(self.frames[0])}")
-        shot = sorted({int(f) for f in self.frames[hit & (self.phase == 0)]})
-        if shot:
-            parts.append(frame_ranges(shot))
-        if (hit & (self.phase > 0)).any():
-            on = self.offset[hit & (self.phase > 0)]
-            parts.append(f"the run-out {float(on.min()):.2f}-{float(on.max()):.2f} s after "
-                         f"frame {int(self.frames[-1])}")
+        for phase, side, frame in ((-1, "run-up", 0), (0, "", 0), (1, "run-out", -1)):
+            on = hit & (self.phase == phase)
+            if not on.any():
+                continue
+            if phase == 0:
+                parts.append(frame_ranges(sorted({int(f) for f in self.frames[on]})))
+                continue
+            far, near = float(self.offset[on].max()), float(self.offset[on].min())
+            a, b = (far, near) if phase < 0 else (near, far)  # in the take's order
+            parts.append(f"the {side} {a:.2f}-{b:.2f} s {'before' if phase < 0 else 'after'} "
+                         f"frame {int(self.frames[frame])}")
         return ", ".join(parts)
 
 

@@ -463,8 +463,6 @@ def hold_note(held: NDArray[np.bool_], frames: NDArray[np.int_],
     if not runs or not all(any(at_edge(r, f) for f, _ in edges) for r in runs):
         return None
     near = sorted({(f, what) for f, what in edges if any(at_edge(r, f) for r in runs)})
-    if not near:
-        return None
     said = " and ".join(f"{what} a hold at frame {f}" for f, what in near[:4])
     more = f" (and {len(near) - 4} more)" if len(near) > 4 else ""
     return (f"the limits are exceeded where the camera {said}{more}: the robot holds still "

@@ -232,15 +232,16 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
             joints = take.q[:, :len(JOINT_NAMES)]
             s = take_samples(robot, joints, take.frame_samples)
             q, tcs = joints[s], sample_times(take.t[s], take.frame_times, problem.time_codes)
-            moments = Moments.of(take.t[s], take.frame_times, frames)
+            t, t_frames = take.t[s], take.frame_times
         else:
             q, tcs = path.q, problem.time_codes[idx]
-            moments = Moments.of(times, times, frames)
+            t = t_frames = times
         dist, worst = model.closest(q, tcs, base2world, problem.clearance)
         marg["obstacle_m"] = float(dist.min()) if math.isfinite(dist.min()) else math.inf
         if worst is not None:
             free = False
-            reason = str(collision_error(worst, moments, problem.clearance))
+            reason = str(collision_error(worst, Moments.of(t, t_frames, frames),
+                                         problem.clearance))
     return Result(x, y, yaw_deg, full, 1.0, free, feasible, float(rep.max_speed),
                   _binding(rep.peak_use), marg, reason)
 
