@@ -72,8 +72,6 @@ class Problem:
         self._prev_packed = previous[AX]
         self._limits = packed_limits(previous, bounds.lower, bounds.upper)
         self._cost_matrix = USES * self.w[AX, None]  # (36, 8): F of each branch
-        self.evaluations = 0
-        self.calls = 0
         self.near_line = False
         self.probe_shift = math.inf  # how far the extend probe moved the best point [m]
 
@@ -86,8 +84,6 @@ class Problem:
         if b.branch is not None:
             ok = ok & (np.arange(N_BRANCHES) == b.branch)
         cost = np.where(ok, np.abs(packed - self._prev_packed) @ self._cost_matrix, np.inf)
-        self.evaluations += r1.shape[0]
-        self.calls += 1
         flat = int(np.argmin(cost))
         c = float(cost.flat[flat])
         if c < self.best_cost:
