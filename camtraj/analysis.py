@@ -19,9 +19,14 @@ if TYPE_CHECKING:
     from camtraj.timing import Take
     from camtraj.usd_shot import Shot
 
-__all__ = ["Analysis", "Placement", "axis_value", "margins_summary"]
+__all__ = ["DEFAULT_SOURCE", "Analysis", "Placement", "axis_value", "margins_summary",
+           "placement_text"]
 
 Array = NDArray[np.float64]
+
+
+DEFAULT_SOURCE = "default (identity)"
+"""The source of the placement at the stage origin (no ``--placement``, no set file's)."""
 
 
 @dataclass(frozen=True)
@@ -32,7 +37,10 @@ class Placement:
     """
 
     base2world: Array = field(default_factory=lambda: np.eye(4))
-    source: str = "default (identity)"
+    source: str = DEFAULT_SOURCE
+    overrides: str | None = None
+    """The set file's placement that this one (``--placement``) replaces, as
+    :func:`placement_text` shows it; None when nothing was replaced."""
 
     @classmethod
     def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,
@@ -52,6 +60,14 @@ class Placement:
             "yaw_deg": math.degrees(math.atan2(R[1, 0], R[0, 0])),
             "rotation": R.tolist(),
         }
+
+
+def placement_text(desc: dict[str, Any]) -> str:
+    """A placement (:meth:`Placement.describe`) for people: where the base stands and from
+    which file or option."""
+    x, y, z = desc.get("translation_m", (0.0, 0.0, 0.0))
+    return (f"x {x:.3f} m, y {y:.3f} m, z {z:.3f} m, yaw {desc.get('yaw_deg', 0.0):.2f} deg "
+            f"({desc.get('source', '?')})")
 
 
 @dataclass

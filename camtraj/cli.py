@@ -23,6 +23,7 @@ import click
 
 import camtraj
 from camtraj import interrupts, jsonsafe
+from camtraj.analysis import DEFAULT_SOURCE, placement_text
 from camtraj.errors import (
     CamtrajError,
     CollisionError,
@@ -323,7 +324,7 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
         options = _options(kw)
         result = run(shot, None, options, progress=progress, report=report)
     except UnreachableFramesError as exc:
-        result = _unreachable_report(shot, exc)
+        result = _unreachable_report(shot, exc, options)
     except TimingLimitError as exc:
         result = _limit_report(shot, exc, options)
     except CollisionError as exc:
@@ -463,17 +464,37 @@ def _axes(table: dict[str, Any]) -> list[tuple[str, bool]]:
     return [*zip(JOINT_NAMES, REVOLUTE.tolist(), strict=True), *lens]
 
 
-def _unreachable_report(shot: str, exc: UnreachableFramesError) -> dict[str, Any]:
+def _unreachable_report(shot: str, exc: UnreachableFramesError,
+                        options: ConvertOptions | None) -> dict[str, Any]:
     return {
         "status": "unreachable",
         "shot": shot,
         "message": str(exc),
+        "advice": _place_command(shot, options),
         "unreachable": [
             {"frame": e.frame, "miss": e.miss, "miss_unit": e.miss_unit, "axis": e.axis,
              "reason": e.reason}
             for e in exc.errors
         ],
     }
+
+
+def _place_command(shot: str, options: ConvertOptions | None) -> str:
+    """The ``camtraj place`` command line that searches a placement for the shot as it was
+    checked: the same robot, set file (its floor, region, yaw range and obstacles), camera,
+    frames, lens, clearance and timing."""
+    words = ["camtraj", "place", shot]
+    if options is not None:
+        for flag, value in (("--robot", options.robot), ("--set-file", options.set_file),
+                            ("--camera", options.camera), ("--lens", options.lens),
+                            ("--clearance", options.clearance)):
+            if value is not None:
+                words += [flag, str(value)]
+        if options.frames is not None:
+            words += ["--frames", f"{options.frames[0]}:{options.frames[1]}"]
+        if options.timing != "shot":
+            words += ["--timing", options.timing]
+    return shlex.join(words)
 
 
 def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
@@ -550,8 +571,8 @@ def _report(r: dict[str, Any]) -> str:
             amount = (f"{u['miss']:.3f} m" if u["miss_unit"] == "m"
                       else f"{math.degrees(u['miss']):.1f} deg")
             lines.append(f"  {u['frame']:>5}  {amount:>10}  {u['reason']}")
-        lines.append(f"  note: camtraj place {shlex.quote(r['shot'])} looks for a track "
-                     "placement that reaches every frame")
+        lines.append(f"  note: {r['advice']} looks for a track placement that reaches "
+                     "every frame")
         return "\n".join(lines)
     if r["status"] == "collision":
         return f"{r['shot']}: COLLISION\n  {r['message']}"
@@ -585,6 +606,8 @@ def _report(r: dict[str, Any]) -> str:
         f"speed factor {r['speed_factor']:.3f}, "
         f"{servo(r['servo_rate_hz'], r.get('servo_step_ms'))}",
         f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
+        *([f"  placement {placement_text(r['placement'])}"]
+          if r["placement"]["source"] != DEFAULT_SOURCE else []),
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "
         "(extent)   margin  to start",
     ]

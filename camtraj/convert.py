@@ -12,6 +12,7 @@ import math
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
-from camtraj.analysis import Analysis, Placement, axis_value, margins_summary
+from camtraj.analysis import Analysis, Placement, axis_value, margins_summary, placement_text
 from camtraj.errors import (
     InfeasibleError,
     InputError,
@@ -111,15 +112,22 @@ def read_shared_inputs(options: ConvertOptions) -> None:
 
 
 def load_placement(options: ConvertOptions) -> Placement:
-    if options.placement is not None:
-        x, y, z, yaw = options.placement
-        return Placement.from_xyz_yaw(x, y, z, yaw)
+    """The robot base's placement: ``--placement``, else the set file's, else the stage
+    origin. ``--placement`` over a set file's placement says which one it replaces
+    (:attr:`Placement.overrides`, a warning of the run)."""
+    from_file = None
     if options.set_file is not None:
         sf = SetFile.read(options.set_file)
         if sf.base2world is not None:
             layout = "" if sf.layout is None else f", layout {sf.layout}"
-            return Placement(sf.base2world, f"{options.set_file}{layout}")
-    return Placement()
+            from_file = Placement(sf.base2world, f"{options.set_file}{layout}")
+    if options.placement is not None:
+        x, y, z, yaw = options.placement
+        given = Placement.from_xyz_yaw(x, y, z, yaw)
+        if from_file is None or np.array_equal(from_file.base2world, given.base2world):
+            return given
+        return replace(given, overrides=placement_text(from_file.describe()))
+    return from_file or Placement()
 
 
 CUT_RATIO = 8.0
@@ -422,6 +430,10 @@ def run_warnings(analysis: Analysis) -> list[str]:
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     warnings = [*shot.warnings, *take.report.warnings]
+    if analysis.placement.overrides is not None:
+        warnings.append(f"--placement replaces the set file's placement "
+                        f"{analysis.placement.overrides}: the take is for the robot where "
+                        f"--placement puts it")
     if analysis.robot.lens is not None:
         from camtraj.lens import lens_warnings
 

@@ -346,6 +346,29 @@ def test_check_unreachable_names_frames_and_misses_and_exits_3(
     _assert_wrote_nothing(cli, "check_unreachable_json")
 
 
+def test_unreachable_advice_keeps_the_set_file_and_names_base_coordinates(
+    tmp_path: Path, robot: Robot
+) -> None:
+    """The note's place command carries what the check was given (the set file's floor,
+    region and obstacles bind place too), and each miss says which frame its coordinates
+    are in: the camera mount's position from the robot base, not the stage's."""
+    set_file = tmp_path / "set.toml"
+    set_file.write_text("[placement]\nx = 1.0\ny = 0.5\nz = 0.0\nyaw_deg = 0.0\n")
+    proc = run_cli("check", UNREACHABLE, "--set-file", set_file, "--frames", "29:31",
+                   "--json")
+    assert proc.returncode == 3, proc.stderr
+    rep = json.loads(proc.stdout)
+    assert rep["advice"] == (f"camtraj place {UNREACHABLE} --set-file {set_file} "
+                             f"--frames 29:31")
+    cam = usd_camera(UNREACHABLE)
+    frame = list(cam.frames).index(30)
+    mount = cam.poses[frame] @ np.linalg.inv(robot.camera2flange)  # stage, Z-up metres
+    x, y, z = mount[:3, 3] - (1.0, 0.5, 0.0)
+    (miss,) = [u for u in rep["unreachable"] if u["frame"] == 30]
+    assert f"camera mount at ({x:.3f}, {y:.3f}, {z:.3f}) m in robot base coordinates" \
+        in miss["reason"], miss["reason"]
+
+
 # --------------------------------------------------------------------------------------------
 # info, help, --summary, --placement
 # --------------------------------------------------------------------------------------------

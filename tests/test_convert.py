@@ -704,3 +704,33 @@ def test_a_jump_between_frames_is_named_with_its_axis_frames_and_size() -> None:
     plain = run_cli("check", shot_path, "--json")
     assert plain.returncode == 0, plain.stderr
     assert not [w for w in json.loads(plain.stdout)["warnings"] if "jump" in w]
+
+
+def test_the_placement_is_shown_and_placement_over_a_set_file_says_what_it_replaces(
+        tmp_path: Path) -> None:
+    """A scene's layout comes from its set file; --placement wins over it, but not silently
+    (a take for another track position than the one laid, with nothing on screen, was a
+    new user's finding). The output names the placement each take is for."""
+    set_file = tmp_path / "set.toml"
+    set_file.write_text('[placement]\nx = 0.05\ny = 0.0\nz = 0.0\nyaw_deg = 1.5\n'
+                        'layout = "scA"\n')
+    shot = SHOTS / "maya_dolly_push_in.usda"
+    runs = run_all({
+        "file": ("check", shot, "--set-file", set_file, "--json"),
+        "both": ("check", shot, "--set-file", set_file, "--placement", "0,0,0,0"),
+        "same": ("check", shot, "--set-file", set_file, "--placement", "0.05,0,0,1.5"),
+        "none": ("check", shot),
+    })
+    assert all(r.returncode == 0 for r in runs.values()), {k: r.stderr for k, r in runs.items()}
+    placed = json.loads(runs["file"].stdout)
+    assert placed["placement"]["source"] == f"{set_file}, layout scA"
+    assert placed["placement"]["translation_m"] == [0.05, 0.0, 0.0]
+    assert not placed["warnings"]
+    both = runs["both"].stdout
+    assert "  placement x 0.000 m, y 0.000 m, z 0.000 m, yaw 0.00 deg (--placement)\n" in both
+    assert (f"  warning: --placement replaces the set file's placement x 0.050 m, y 0.000 m, "
+            f"z 0.000 m, yaw 1.50 deg ({set_file}, layout scA): the take is for the robot "
+            f"where --placement puts it\n") in both
+    assert "  placement x 0.050 m" in runs["same"].stdout  # the same place: nothing replaced
+    assert "warning" not in runs["same"].stdout
+    assert "placement" not in runs["none"].stdout  # the stage origin, as in the README

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -97,6 +98,8 @@ def test_failing_shot_leaves_nothing_and_keep_going_builds_the_rest(built: Path)
     (out / "unreachable.summary.json").write_text("{}")
     proc = _make(built, "-k", "-j2", EXCLUDE="")
     assert proc.returncode != 0
+    # the recipe keeps camtraj's exit code: 3, the shot cannot be done (not make's "Error 1")
+    assert re.search(r"unreachable\.mcap\S*\] Error 3$", proc.stderr, re.MULTILINE), proc.stderr
     assert not (out / "unreachable.mcap").exists()
     assert not (out / "unreachable.summary.json").exists()
     assert not list(out.glob("*.tmp*"))

@@ -180,7 +180,7 @@ def _diagnose(robot: Robot, T: Array, prev: Array) -> UnreachableError:
     prob = Problem(robot, T, prev, bounds)
     intervals, miss = prob.intervals, prob.miss
     W = T[:3, 3]
-    where = f"camera at ({W[0]:.3f}, {W[1]:.3f}, {W[2]:.3f}) m"
+    where = f"camera mount at ({W[0]:.3f}, {W[1]:.3f}, {W[2]:.3f}) m in robot base coordinates"
     if not intervals:
         return UnreachableError(
             f"{where} is out of reach by {miss:.3f} m (arm fully extended, track "

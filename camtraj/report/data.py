@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.analysis import placement_text
 from camtraj.errors import (
     InfeasibleError,
     InputError,
@@ -225,12 +226,6 @@ def pose_indices(n: int, k: int = N_POSES) -> IntArray:
     return out
 
 
-def _placement_text(desc: dict[str, Any]) -> str:
-    x, y, z = desc.get("translation_m", (0.0, 0.0, 0.0))
-    return (f"x {x:.3f} m, y {y:.3f} m, z {z:.3f} m, yaw {desc.get('yaw_deg', 0.0):.2f} deg "
-            f"({desc.get('source', '?')})")
-
-
 def _base2world(desc: dict[str, Any]) -> Array:
     T = np.eye(4)
     T[:3, :3] = np.asarray(desc.get("rotation", np.eye(3)), dtype=float)
@@ -274,7 +269,7 @@ def from_analysis(
     common: dict[str, Any] = {
         "shot": str(shot_path), "camera": shot.camera_path,
         "robot": f"{robot.name} ({robot.source})", "fps": float(shot.fps),
-        "placement": _placement_text(analysis.placement.describe()),
+        "placement": placement_text(analysis.placement.describe()),
         "base2world": analysis.placement.base2world.copy(),
         "joint_names": tuple(limits.names), "revolute": limits.revolute.copy(),
         "lower": limits.lower.copy(), "upper": limits.upper.copy(),
@@ -502,7 +497,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         robot=md.get("robot", "?"), status="ok", message="", timing=mode,
         speed_factor=_float(md.get("speed_factor")), servo_rate_hz=_float(
             md.get("servo_rate_hz")), fps=_float(md.get("fps")),
-        max_speed=_float(md.get("max_speed")), placement=_placement_text(placement),
+        max_speed=_float(md.get("max_speed")), placement=placement_text(placement),
         base2world=_base2world(placement), joint_names=names, revolute=revolute,
         lower=lim["lower"], upper=lim["upper"], velocity=lim["max_velocity"],
         acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], samples=samples,
