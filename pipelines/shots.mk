@@ -101,11 +101,12 @@ $(CAMTRAJ_OPTIONS_FILE): | $(OUT)
 	$(file >$@,$(CAMTRAJ_OPTIONS))
 
 # One conversion; $< is the shot. Old outputs go first, and a failed run removes what it wrote,
-# so a shot that fails leaves neither an MCAP nor a summary behind.
+# so a shot that fails leaves neither an MCAP nor a summary behind; the recipe exits with
+# camtraj's own code (2 bad input, 3 cannot be done, 130 interrupted: make says "Error 3").
 define camtraj-convert
 	@rm -f $@ $(@:.mcap=.summary.json)
 	$(CAMTRAJ) convert $< -o $@ --summary $(@:.mcap=.summary.json) $(CAMTRAJ_OPTIONS) \
-	  || { rm -f $@ $(@:.mcap=.summary.json); exit 1; }
+	  || { code=$$?; rm -f $@ $(@:.mcap=.summary.json); exit $$code; }
 endef
 
 $(OUT)/%.mcap: $(SHOTS_DIR)/%.usda $(CAMTRAJ_FILES) $(CAMTRAJ_OPTIONS_FILE) | $(OUT)
