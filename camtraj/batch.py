@@ -82,6 +82,17 @@ __all__ = [
 OPTIONS_KEY = "convert_options"
 """Key under which a batch records the convert options in each shot's summary JSON."""
 
+def recorded_options(options: ConvertOptions) -> dict[str, Any]:
+    """The convert options a batch records in each summary (``convert_options``) and compares
+    to skip a shot: the robot, set and lens files as absolute paths with links resolved, so
+    ``setA.toml`` and ``./setA.toml`` (or the same file from another folder) are one option."""
+    recorded = options_to_json(options)
+    for key in ("robot", "set_file", "lens"):
+        if recorded[key] is not None:
+            recorded[key] = os.path.realpath(recorded[key])
+    return recorded
+
+
 REPORT_NAME = "batch_report.json"
 """File name of the batch report inside OUTDIR."""
 
@@ -359,7 +370,7 @@ def _convert_one(
         # The options are recorded so that a later batch with other options does not skip
         # this shot.
         summary = convert(shot, output, options, summary_path=summary_path,
-                          summary_extra={OPTIONS_KEY: options_to_json(options)},
+                          summary_extra={OPTIONS_KEY: recorded_options(options)},
                           rig_layer=rig_layer)
     except CamtrajError as exc:
         # the batch names the shot on every line: a message that starts with it says it once
@@ -584,7 +595,7 @@ def run_batch(
 
     extra_inputs = [Path(p) for p in (options.robot, options.set_file, options.lens)
                     if p is not None]
-    wanted = json.loads(json.dumps(options_to_json(options)))  # as read back from a summary
+    wanted = json.loads(json.dumps(recorded_options(options)))  # as read back from a summary
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
     for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):

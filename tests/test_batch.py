@@ -169,6 +169,33 @@ def test_touched_shot_robot_file_and_force_reconvert(tmp_path: Path) -> None:
         assert statuses() == ["ok"], path
 
 
+def test_the_same_robot_file_spelled_another_way_is_the_same_option(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``robot.toml``, ``./robot.toml`` and its absolute path name one file: a re-run that
+    spells it differently skips the shots that are up to date (a new user's batch converted
+    every shot again). Another file is another option, even with the same content."""
+    shot = tmp_path / "dolly.usda"
+    shutil.copy2(SAMPLES / "maya_dolly_push_in.usda", shot)
+    for name in ("robot.toml", "copy.toml"):
+        shutil.copy2(ROOT / "camtraj" / "data" / "robot.toml", tmp_path / name)
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+
+    def status(robot: str) -> str:
+        options = build_options(camera=None, robot=robot, placement=None, frames="1001:1012",
+                                rate=250.0, timing="shot")
+        report = run_batch([str(shot)], out, jobs=1, options=options)
+        assert report.exit_code == 0, report.table()
+        return report.results[0].status
+
+    assert status("robot.toml") == "ok"
+    assert status("./robot.toml") == "skipped"
+    assert status(str(tmp_path / "robot.toml")) == "skipped"
+    assert status("copy.toml") == "ok"
+    recorded = json.loads((out / "dolly.summary.json").read_text())["convert_options"]
+    assert recorded["robot"] == os.path.realpath(tmp_path / "copy.toml")
+
+
 def test_a_shot_that_fails_now_keeps_its_earlier_take_and_says_so(tmp_path: Path) -> None:
     """A shot converted once, then re-exported as a move the robot cannot reach: the batch
     fails it and removes nothing (its earlier MCAP and summary stay byte for byte), and says
