@@ -27,7 +27,8 @@ Film frames are not time codes. A stage's ``timeCodesPerSecond`` (tcps) and
 ``framesPerSecond`` (fps) may differ (Houdini and some Maya exports write 240 tcps at 24 fps):
 film frame ``f`` is time code ``f * tcps / fps``. The shot is sampled on whole film frames
 inside the stage's ``startTimeCode``/``endTimeCode`` (or, without them, inside the span of the
-camera's time samples, so motion-blur sub-frame keys at f-1/4, f, f+1/4 still sample at f).
+camera's time samples, so motion-blur sub-frame keys at f-1/4, f, f+1/4 still sample at f; one
+of them alone bounds its end of that span).
 Rates are exact fractions: 23.976 and 23.976023976 both mean 24000/1001, so an NTSC stage that
 writes one as tcps and the other as fps keeps every frame.
 
@@ -357,8 +358,20 @@ def _read(
         raise ShotFileError(msg)
     meters_per_unit = _meters_per_unit(stage, path)
 
-    prim = _select_camera(stage, path, camera)
+    broken = _composition_errors(stage)
+    try:
+        prim = _select_camera(stage, path, camera)
+    except ShotFileError as exc:
+        if not broken:
+            raise
+        msg = f"{exc}; USD could not compose the stage: {broken[0][1]}"
+        raise ShotFileError(msg) from None
     cam_path = str(prim.GetPath())
+    for site, message in broken:
+        if site == "/" or Sdf.Path(cam_path).HasPrefix(Sdf.Path(site)):
+            msg = (f"{path}: the camera {cam_path} is composed from a layer USD could not open, "
+                   f"so its move would be read without it: {message}")
+            raise ShotFileError(msg)
 
     tcps = _rate(stage, path, "timeCodesPerSecond", stage.GetTimeCodesPerSecond)
     fps = (
@@ -426,6 +439,7 @@ def _read(
             _orthographic_warning(cam, cam_path),
             _shear_warning(cam_path, shear_deg, frame_numbers, _has_moving_parent(prim)),
             _pixel_aspect_warning(stage),
+            _layer_units_warning(prim, cam_path, meters_per_unit, up_axis),
         )
         if w
     ]
@@ -470,6 +484,32 @@ def _metadata_number(stage: Any, key: str, typed_get: Any) -> Any:
         return stage.GetMetadata(key)
 
 
+def _layer_units_warning(prim: Any, cam_path: str, meters_per_unit: float,
+                         up_axis: str) -> str | None:
+    """A warning when a layer that authors the camera or one of its parents declares other
+    units or another up axis than the stage: USD reads every layer in the stage's (it
+    converts neither across a reference nor a sublayer), so a camera animated in a metre,
+    Z-up layer referenced into a centimetre, Y-up stage moves a hundredth as far, turned."""
+    while prim and not prim.IsPseudoRoot():
+        for spec in prim.GetPrimStack():
+            root = spec.layer.pseudoRoot
+            theirs = []
+            if root.HasInfo("metersPerUnit"):
+                mpu = float(root.GetInfo("metersPerUnit"))
+                if not math.isclose(mpu, meters_per_unit, rel_tol=1e-9):
+                    theirs.append(f"metersPerUnit {mpu:g} (the stage's: {meters_per_unit:g})")
+            if root.HasInfo("upAxis") and str(root.GetInfo("upAxis")) != up_axis:
+                theirs.append(f"upAxis {root.GetInfo('upAxis')} (the stage's: {up_axis})")
+            if theirs:
+                return (f"{prim.GetPath()} (the camera {cam_path} or a parent) is authored in "
+                        f"layer {spec.layer.identifier}, written with {' and '.join(theirs)}: "
+                        f"USD reads it in the stage's units and up axis, so its move may be "
+                        f"scaled or turned; re-export the layer in the stage's units, or "
+                        f"scale and turn the reference to match")
+        prim = prim.GetParent()
+    return None
+
+
 def _meters_per_unit(stage: Any, path: Path) -> float:
     if not stage.HasAuthoredMetadata("metersPerUnit"):
         logger.warning(
@@ -507,6 +547,15 @@ def _rate(stage: Any, path: Path, key: str, typed_get: Any) -> Fraction:
     if ntsc >= 1 and abs(rate - ntsc / 1.001) <= 1e-5 * rate:
         return Fraction(ntsc * 1000, 1001)
     return Fraction(rate)
+
+
+def _composition_errors(stage: Any) -> list[tuple[str, str]]:
+    """USD's composition errors (a sublayer, reference or payload it could not open), as
+    (the prim path where the failed arc is, "/" for the root layer stack's sublayers; USD's
+    message in one line). A missing sublayer or a missing layer under the camera or one of
+    its parents can hold the camera's animation: read without it, a dolly becomes a still."""
+    return [(str(e.rootSite.path), " ".join(str(e).split()).removesuffix("; skipping."))
+            for e in stage.GetCompositionErrors()]
 
 
 def _camera_paths(stage: Any) -> list[str]:
@@ -573,12 +622,20 @@ def _film_frames(
             times this.
     """
     authored: tuple[float, float] | None
-    if stage.HasAuthoredTimeCodeRange():
+    has_start, has_end = (stage.HasAuthoredMetadata(key)
+                          for key in ("startTimeCode", "endTimeCode"))
+    if has_start and has_end:
         authored = (float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode()))
         what = "authored range"
     else:
         authored = _sample_span(prim)
         what = "animated range (the stage has no startTimeCode/endTimeCode)"
+        if authored is not None and (has_start or has_end):
+            # one end authored: it bounds the shot, the keys give the other end
+            authored = (float(stage.GetStartTimeCode()) if has_start else authored[0],
+                        float(stage.GetEndTimeCode()) if has_end else authored[1])
+            what = ("range from startTimeCode to the last key" if has_start
+                    else "range from the first key to endTimeCode")
     span: tuple[int, int] | None = None
     if authored is not None:
         if not all(math.isfinite(t) for t in authored):
@@ -587,6 +644,8 @@ def _film_frames(
         if not authored[0] <= authored[1]:
             msg = (
                 f"{path}: startTimeCode {_fmt(authored[0])} is after endTimeCode "
+                f"{_fmt(authored[1])}" if has_start and has_end else
+                f"{path}: the shot's {what} is backwards: time codes {_fmt(authored[0])} to "
                 f"{_fmt(authored[1])}"
             )
             raise ShotFileError(msg)

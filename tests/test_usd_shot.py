@@ -726,3 +726,87 @@ def camera_holds_any(poses: Array) -> bool:
     from camtraj.ik import camera_holds
 
     return bool(camera_holds(poses).any())
+
+
+# --------------------------------------------------------------------------------------------
+# Layers USD could not open
+
+
+def test_a_missing_layer_the_camera_is_composed_from_is_an_error(tmp_path: Path) -> None:
+    """A missing animation sublayer or a missing camera reference would turn the move into a
+    still (or no camera at all): the error names the layer. A missing reference elsewhere on
+    the stage (set dressing a farm node lacks) does not stop the camera from being read."""
+    stage = _new_stage(tmp_path / "sub.usda")
+    UsdGeom.Camera.Define(stage, "/cam").AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
+    stage.GetRootLayer().subLayerPaths.append("./anim_missing.usda")
+    with pytest.raises(ShotFileError, match=r"the camera /cam is composed from a layer USD "
+                       r"could not open, so its move would be read without it: Could not load "
+                       r"sublayer @.*anim_missing\.usda@") as err:
+        read_shot(_save(stage))
+    assert "\n" not in str(err.value) and not str(err.value).endswith("skipping.")
+
+    stage = _new_stage(tmp_path / "ref.usda")
+    UsdGeom.Xform.Define(stage, "/World")
+    stage.DefinePrim("/World/shotCam").GetReferences().AddReference("./cam_missing.usda")
+    for camera in (None, "/World/shotCam"):
+        with pytest.raises(ShotFileError, match=r"USD could not compose the stage: Could not "
+                           r"open asset @.*cam_missing\.usda@ for reference"):
+            read_shot(_save(stage), camera=camera)
+
+    stage = _new_stage(tmp_path / "set.usda")
+    UsdGeom.Camera.Define(stage, "/World/cam").AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
+    stage.DefinePrim("/World/set").GetReferences().AddReference("./set_missing.usda")
+    shot = read_shot(_save(stage))
+    np.testing.assert_allclose(shot.cam2world[0, :3, 3], [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize(("start", "end", "frames"), [
+    (8, None, (8, 15)), (None, 12, (5, 12)), (20, None, None)])
+def test_one_authored_end_of_the_range_bounds_the_shot(
+        tmp_path: Path, start: int | None, end: int | None,
+        frames: tuple[int, int] | None) -> None:
+    """startTimeCode or endTimeCode alone (USD's HasAuthoredTimeCodeRange wants both) still
+    cuts the shot where it says; the keys give the other end. Past the keys it is an error."""
+    stage = _new_stage(tmp_path / "one_end.usda", frames=None)
+    if start is not None:
+        stage.SetStartTimeCode(start)
+    if end is not None:
+        stage.SetEndTimeCode(end)
+    op = UsdGeom.Camera.Define(stage, "/cam").AddTranslateOp()
+    for f in range(5, 16):
+        op.Set(Gf.Vec3d(f, 0, 0), f)
+    path = _save(stage)
+    if frames is None:
+        with pytest.raises(ShotFileError, match="range from startTimeCode to the last key is "
+                           "backwards: time codes 20 to 15"):
+            read_shot(path)
+        return
+    shot = read_shot(path)
+    np.testing.assert_array_equal(shot.frames, np.arange(frames[0], frames[1] + 1))
+    np.testing.assert_allclose(shot.cam2world[:, 0, 3], shot.frames)
+
+
+def test_a_camera_layer_in_other_units_is_named(tmp_path: Path) -> None:
+    """USD converts no units across a reference: a camera animated in a metre, Z-up layer
+    and referenced into a centimetre, Y-up stage is read in centimetres and Y-up (the move a
+    hundredth as long). The shot is read as USD composes it, with a warning naming the
+    layer; a layer in the stage's own units gets none."""
+    def camera_layer(name: str, up: str, mpu: float) -> str:
+        stage = _new_stage(tmp_path / name, up_axis=up, meters_per_unit=mpu)
+        op = UsdGeom.Camera.Define(stage, "/cam").AddTranslateOp()
+        for f in range(1, 11):
+            op.Set(Gf.Vec3d(0.2 * f, 0.0, 1.5), f)
+        stage.SetDefaultPrim(stage.GetPrimAtPath("/cam"))
+        return str(_save(stage))
+
+    for layer, up, mpu, warned in (("m_zup.usda", "Z", 1.0, True),
+                                   ("cm_yup.usda", "Y", 0.01, False)):
+        stage = _new_stage(tmp_path / f"shot_{layer}", up_axis="Y", meters_per_unit=0.01)
+        stage.DefinePrim("/shotCam").GetReferences().AddReference(camera_layer(layer, up, mpu))
+        shot = read_shot(_save(stage))
+        np.testing.assert_allclose(shot.cam2world[-1, 0, 3], 0.02)  # 2 units, read as cm
+        named = [w for w in shot.warnings if layer in w]
+        assert len(named) == warned, shot.warnings
+        if warned:
+            assert ("written with metersPerUnit 1 (the stage's: 0.01) and upAxis Z (the "
+                    "stage's: Y)") in named[0]
