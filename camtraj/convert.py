@@ -144,17 +144,40 @@ def _turns(a: Array, b: Array) -> Array:
 
 
 def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> list[str]:
-    """Where the camera jumps between two frames (a cut left in the shot): a translation or
-    rotation step :data:`CUT_RATIO` times the largest step within ``around`` frames of it,
-    and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per jump, then one with the
-    ``--frames`` ranges of the parts between the jumps."""
+    """Where the camera jumps: a frame off the path alone (a bad or blocked key: the camera
+    goes away on one frame and comes straight back, so its two steps are equal and neither is
+    a jump against the other), then a step between two frames (a cut left in the shot). A
+    jump is a translation or rotation :data:`CUT_RATIO` times the largest step within
+    ``around`` frames of it (for a frame off the path, and the step from the frame before it
+    to the frame after it), and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per
+    jump, then one with the ``--frames`` ranges of the parts between the cuts."""
     n = targets.shape[0]
     if n < 3:
         return []
     move = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
     turn = _turns(targets[:-1], targets[1:])
-    out, after = [], []
-    for k in range(n - 1):
+    move2 = np.linalg.norm(targets[2:, :3, 3] - targets[:-2, :3, 3], axis=1)
+    turn2 = _turns(targets[:-2], targets[2:])
+    big = (move > CUT_MIN_M) | (turn > CUT_MIN_RAD)  # the only steps that can be jumps
+    out, after, popped = [], [], set()
+    # frame k off the path alone: steps k - 1 (there) and k (back)
+    for k in (np.flatnonzero(big[:-1] & big[1:]) + 1).tolist():
+        lo, hi = max(0, k - 1 - around), min(n - 1, k + 1 + around)
+        for step, across, floor, unit in ((move, move2, CUT_MIN_M, "m"),
+                                          (turn, turn2, CUT_MIN_RAD, "deg")):
+            away = min(step[k - 1], step[k])
+            others = np.concatenate([step[lo:k - 1], step[k + 1:hi], across[k - 1:k]])
+            if away > floor and away > CUT_RATIO * float(others.max()):
+                size = (f"{away:.3f} m" if unit == "m" else f"{math.degrees(away):.1f} deg")
+                out.append(f"the camera jumps {size} off its path on frame {int(frames[k])} "
+                           f"alone and back (frames {int(frames[k - 1])} and "
+                           f"{int(frames[k + 1])} agree): a bad or blocked key at frame "
+                           f"{int(frames[k])}?")
+                popped |= {k - 1, k}
+                break
+    for k in np.flatnonzero(big).tolist():
+        if k in popped:
+            continue
         lo, hi = max(0, k - around), min(n - 1, k + around + 1)
         for step, floor, text in ((move, CUT_MIN_M, f"{move[k]:.3f} m"),
                                   (turn, CUT_MIN_RAD, f"{math.degrees(turn[k]):.1f} deg")):
@@ -430,6 +453,8 @@ def run_warnings(analysis: Analysis) -> list[str]:
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     warnings = [*shot.warnings, *take.report.warnings]
+    # a bad key or a cut that a slowed-down take (scale, optimal) still runs through
+    warnings += camera_cuts(analysis.targets, shot.frames)
     if analysis.placement.overrides is not None:
         warnings.append(f"--placement replaces the set file's placement "
                         f"{analysis.placement.overrides}: the take is for the robot where "

@@ -689,6 +689,17 @@ def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
     assert camera_cuts(poses(twice), frames)[-1] == (
         "to split the shot there, convert each part on its own: --frames 1:6, --frames 7:18, "
         "--frames 19:24")
+    # one frame off an eased move and straight back (an export glitch or a blocked key): its
+    # two steps are equal, so neither is a cut against the other; it is named as one frame
+    eased = 90.0 * (0.5 - 0.5 * np.cos(np.pi * u))
+    pop = poses(eased)
+    pop[11, :3, 3] = 0.0  # frame 12 at the stage origin
+    assert camera_cuts(pop, frames) == [
+        f"the camera jumps {np.linalg.norm(pop[10, :3, 3]):.3f} m off its path on frame 12 "
+        "alone and back (frames 11 and 13 agree): a bad or blocked key at frame 12?"]
+    assert camera_cuts(poses(np.where(frames == 12, 180.0, 0.0)), frames) == [
+        "the camera jumps 180.0 deg off its path on frame 12 alone and back (frames 11 and 13 "
+        "agree): a bad or blocked key at frame 12?"]
 
 
 def _no_constant(name: str) -> None:
@@ -757,3 +768,30 @@ def test_a_reader_that_stops_early_gets_no_error_line(shot: str) -> None:
         os.close(write)
     assert proc.returncode == 141, proc.stderr
     assert proc.stderr == ""
+
+
+def test_a_frame_off_the_path_is_named_and_a_slowed_take_warns_of_it(tmp_path: Path) -> None:
+    """One key at the stage origin in the middle of a gentle move (an export glitch, or a
+    value-blocked key): the shot fails at its own timing with a note naming the frame, and
+    the scale take, which runs the swing out and back slowly, warns of it (it wrote the
+    take with exit 0 and no word before)."""
+    from camtraj.convert import analyse, run_warnings
+    from camtraj.options import ConvertOptions
+    from camtraj.timing import TimingLimitError
+    from tests.shots import base_move, write_shot
+
+    robot = Robot.default()
+    move = base_move(robot, 48)
+    move[23, :3, 3] = 0.0  # frame 24
+    path = write_shot(tmp_path / "pop.usda", move)
+    said = (f"the camera jumps {np.linalg.norm(move[22, :3, 3]):.3f} m off its path on frame "
+            f"24 alone and back (frames 23 and 25 agree): a bad or blocked key at frame 24?")
+    with pytest.raises(TimingLimitError) as info:
+        analyse(path, ConvertOptions())
+    assert said in getattr(info.value, "__notes__", [])
+    slowed = analyse(path, ConvertOptions(timing="scale"))
+    assert said in run_warnings(slowed)
+    assert not [w for w in run_warnings(analyse(write_shot(tmp_path / "ok.usda",
+                                                           base_move(robot, 48)),
+                                                ConvertOptions()))
+                if "jumps" in w]
