@@ -82,6 +82,7 @@ __all__ = [
 OPTIONS_KEY = "convert_options"
 """Key under which a batch records the convert options in each shot's summary JSON."""
 
+
 def recorded_options(options: ConvertOptions) -> dict[str, Any]:
     """The convert options a batch records in each summary (``convert_options``) and compares
     to skip a shot: the robot, set and lens files as absolute paths with links resolved, so
