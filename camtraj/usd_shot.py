@@ -358,21 +358,27 @@ def _read(
         raise ShotFileError(msg)
     meters_per_unit = _meters_per_unit(stage, path)
 
-    broken = _composition_errors(stage)
     try:
         prim = _select_camera(stage, path, camera)
     except ShotFileError as exc:
-        if not broken:
+        why = _why_no_camera(stage, camera)
+        if why is None:
             raise
-        msg = f"{exc}; USD could not compose the stage: {broken[0][1]}"
+        msg = f"{exc}; USD could not compose the stage: {why}"
         raise ShotFileError(msg) from None
     cam_path = str(prim.GetPath())
-    for site, message in broken:
-        if site == "/" or Sdf.Path(cam_path).HasPrefix(Sdf.Path(site)):
-            msg = (f"{path}: the camera {cam_path} is composed from a layer USD could not open, "
-                   f"so its move would be read without it: {message}")
-            raise ShotFileError(msg)
-
+    own, parents = _composition_errors(prim, parents=False), _composition_errors(prim)
+    if own:
+        msg = (f"{path}: USD could not compose the camera {cam_path} as written, so its move "
+               f"would be read without part of it: {own[0]}")
+        raise ShotFileError(msg)
+    elsewhere = [e for e in _stage_composition_errors(stage) if e not in parents]
+    composition = [
+        f"USD could not compose a parent of the camera {cam_path}, whose move is read without "
+        f"what it would have added: {parents[0]}" if parents else None,
+        f"USD could not compose part of the stage away from the camera ({len(elsewhere)} "
+        f"error(s)): {elsewhere[0]}" if elsewhere else None,
+    ]
     tcps = _rate(stage, path, "timeCodesPerSecond", stage.GetTimeCodesPerSecond)
     fps = (
         _rate(stage, path, "framesPerSecond", stage.GetFramesPerSecond)
@@ -440,6 +446,7 @@ def _read(
             _shear_warning(cam_path, shear_deg, frame_numbers, _has_moving_parent(prim)),
             _pixel_aspect_warning(stage),
             _layer_units_warning(prim, cam_path, meters_per_unit, up_axis),
+            *composition,
         )
         if w
     ]
@@ -484,29 +491,39 @@ def _metadata_number(stage: Any, key: str, typed_get: Any) -> Any:
         return stage.GetMetadata(key)
 
 
+_CAMERA_ATTRIBUTES = ("focalLength", "focusDistance", "fStop", "horizontalAperture",
+                      "verticalAperture", "horizontalApertureOffset", "verticalApertureOffset")
+
+
 def _layer_units_warning(prim: Any, cam_path: str, meters_per_unit: float,
                          up_axis: str) -> str | None:
-    """A warning when a layer that authors the camera or one of its parents declares other
-    units or another up axis than the stage: USD reads every layer in the stage's (it
-    converts neither across a reference nor a sublayer), so a camera animated in a metre,
-    Z-up layer referenced into a centimetre, Y-up stage moves a hundredth as far, turned."""
-    while prim and not prim.IsPseudoRoot():
-        for spec in prim.GetPrimStack():
+    """A warning when a layer that authors the camera's or a parent's transform (or the
+    camera's lens) declares other units or another up axis than the stage: USD reads every
+    layer in the stage's (it converts neither across a reference nor a sublayer), so a camera
+    animated in a metre, Z-up layer referenced into a centimetre, Y-up stage moves a
+    hundredth as far, turned. Layers that author nothing of the move are not named."""
+    here = prim
+    while here and not here.IsPseudoRoot():
+        for spec in here.GetPrimStack():
+            names = list(spec.properties.keys())
+            moves = any(n == "xformOpOrder" or n.startswith("xformOp:") for n in names) or (
+                here == prim and any(n in _CAMERA_ATTRIBUTES for n in names))
             root = spec.layer.pseudoRoot
             theirs = []
-            if root.HasInfo("metersPerUnit"):
+            if moves and root.HasInfo("metersPerUnit"):
                 mpu = float(root.GetInfo("metersPerUnit"))
                 if not math.isclose(mpu, meters_per_unit, rel_tol=1e-9):
                     theirs.append(f"metersPerUnit {mpu:g} (the stage's: {meters_per_unit:g})")
-            if root.HasInfo("upAxis") and str(root.GetInfo("upAxis")) != up_axis:
+            if moves and root.HasInfo("upAxis") and str(root.GetInfo("upAxis")) != up_axis:
                 theirs.append(f"upAxis {root.GetInfo('upAxis')} (the stage's: {up_axis})")
             if theirs:
-                return (f"{prim.GetPath()} (the camera {cam_path} or a parent) is authored in "
-                        f"layer {spec.layer.identifier}, written with {' and '.join(theirs)}: "
-                        f"USD reads it in the stage's units and up axis, so its move may be "
-                        f"scaled or turned; re-export the layer in the stage's units, or "
-                        f"scale and turn the reference to match")
-        prim = prim.GetParent()
+                return (f"{here.GetPath()} (the camera {cam_path} or a parent) is moved by layer "
+                        f"{spec.layer.identifier}, written with {' and '.join(theirs)}: USD "
+                        f"reads it in the stage's units and up axis (it converts neither across "
+                        f"a reference nor a sublayer), so its move may be scaled or turned; "
+                        f"re-export that layer in the stage's units and up axis, or scale and "
+                        f"turn the prim that brings it in to match")
+        here = here.GetParent()
     return None
 
 
@@ -549,13 +566,62 @@ def _rate(stage: Any, path: Path, key: str, typed_get: Any) -> Fraction:
     return Fraction(rate)
 
 
-def _composition_errors(stage: Any) -> list[tuple[str, str]]:
-    """USD's composition errors (a sublayer, reference or payload it could not open), as
-    (the prim path where the failed arc is, "/" for the root layer stack's sublayers; USD's
-    message in one line). A missing sublayer or a missing layer under the camera or one of
-    its parents can hold the camera's animation: read without it, a dolly becomes a still."""
-    return [(str(e.rootSite.path), " ".join(str(e).split()).removesuffix("; skipping."))
-            for e in stage.GetCompositionErrors()]
+def _composition_errors(prim: Any, *, parents: bool = True) -> list[str]:
+    """USD's composition errors of a prim (and, with ``parents``, of its parents instead),
+    one line each: an arc it could not follow (a reference or payload whose layer is missing,
+    or whose prim path is not in it) and a layer missing from a layer stack that contributes
+    to it (a sublayer of the shot, or of a referenced asset). Such an error on the camera
+    itself can hold its animation: read without it, a dolly becomes a still."""
+    found: list[str] = []
+    here = prim.GetParent() if parents else prim
+    while here and not here.IsPseudoRoot():
+        index = here.GetPrimIndex()
+        errors = list(index.localErrors)
+        nodes = [index.rootNode]
+        while nodes:
+            node = nodes.pop()
+            errors += node.layerStack.localErrors
+            nodes += node.children
+        for error in errors:
+            text = _one_line_error(error)
+            if text not in found:
+                found.append(text)
+        if not parents:
+            break
+        here = here.GetParent()
+    return found
+
+
+def _why_no_camera(stage: Any, camera: str | None) -> str | None:
+    """What USD could not compose that may have held the camera that was not found: an
+    error on the asked prim path (its nearest prim on the stage) or its parents; without a
+    path, the stage's first error when it has no camera at all."""
+    if camera is None:
+        errors = _stage_composition_errors(stage) if not _camera_paths(stage) else []
+    elif Sdf.Path.IsValidPathString(camera) and Sdf.Path(camera).IsAbsolutePath():
+        at = Sdf.Path(camera)
+        while not stage.GetPrimAtPath(at) and at != Sdf.Path.absoluteRootPath:
+            at = at.GetParentPath()
+        prim = stage.GetPrimAtPath(at)
+        errors = (_composition_errors(prim, parents=False) + _composition_errors(prim)
+                  if prim and not prim.IsPseudoRoot() else [])
+    else:
+        errors = []
+    return errors[0] if errors else None
+
+
+def _stage_composition_errors(stage: Any) -> list[str]:
+    """Every composition error of the stage, one line each (:func:`_composition_errors`)."""
+    found: list[str] = []
+    for error in stage.GetCompositionErrors():
+        text = _one_line_error(error)
+        if text not in found:
+            found.append(text)
+    return found
+
+
+def _one_line_error(error: Any) -> str:
+    return " ".join(str(error).split()).removesuffix("; skipping.")
 
 
 def _camera_paths(stage: Any) -> list[str]:
@@ -668,8 +734,10 @@ def _film_frames(
                 if _has_splines(prim)
                 else "has no time samples"
             )
+            stage_has = ("only a startTimeCode" if has_start else
+                         "only an endTimeCode" if has_end else "no startTimeCode/endTimeCode")
             msg = (
-                f"{path}: no frame range: the stage has no startTimeCode/endTimeCode and the "
+                f"{path}: no frame range: the stage has {stage_has} and the "
                 f"camera {animation}; give the frames to read with --frames FIRST:LAST"
             )
             raise ShotFileError(msg)

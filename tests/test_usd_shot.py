@@ -733,31 +733,54 @@ def camera_holds_any(poses: Array) -> bool:
 
 
 def test_a_missing_layer_the_camera_is_composed_from_is_an_error(tmp_path: Path) -> None:
-    """A missing animation sublayer or a missing camera reference would turn the move into a
-    still (or no camera at all): the error names the layer. A missing reference elsewhere on
-    the stage (set dressing a farm node lacks) does not stop the camera from being read."""
+    """A missing sublayer of the shot, or of the camera's own asset, or a missing camera
+    reference would turn the move into a still (or no camera at all): an error naming the
+    layer. A missing reference on a parent, or anywhere else on the stage (set dressing a
+    farm node lacks, a set asset's own missing sublayer), is a warning: the camera is read."""
     stage = _new_stage(tmp_path / "sub.usda")
     UsdGeom.Camera.Define(stage, "/cam").AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
     stage.GetRootLayer().subLayerPaths.append("./anim_missing.usda")
-    with pytest.raises(ShotFileError, match=r"the camera /cam is composed from a layer USD "
-                       r"could not open, so its move would be read without it: Could not load "
+    with pytest.raises(ShotFileError, match=r"USD could not compose the camera /cam as written, "
+                       r"so its move would be read without part of it: Could not load "
                        r"sublayer @.*anim_missing\.usda@") as err:
         read_shot(_save(stage))
     assert "\n" not in str(err.value) and not str(err.value).endswith("skipping.")
 
+    asset = _new_stage(tmp_path / "cam_asset.usda")
+    UsdGeom.Camera.Define(asset, "/Cam").AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
+    asset.SetDefaultPrim(asset.GetPrimAtPath("/Cam"))
+    asset.GetRootLayer().subLayerPaths.append("./cam_fx_missing.usda")
+    _save(asset)
+    stage = _new_stage(tmp_path / "payload.usda")
+    stage.DefinePrim("/World/shotCam").GetPayloads().AddPayload("./cam_asset.usda")
+    with pytest.raises(ShotFileError, match=r"camera /World/shotCam as written.*"
+                       r"cam_fx_missing\.usda"):
+        read_shot(_save(stage))
+
     stage = _new_stage(tmp_path / "ref.usda")
     UsdGeom.Xform.Define(stage, "/World")
     stage.DefinePrim("/World/shotCam").GetReferences().AddReference("./cam_missing.usda")
-    for camera in (None, "/World/shotCam"):
+    for camera in (None, "/World/shotCam", "/World/shotCam/nothing"):
         with pytest.raises(ShotFileError, match=r"USD could not compose the stage: Could not "
                            r"open asset @.*cam_missing\.usda@ for reference"):
             read_shot(_save(stage), camera=camera)
 
+    set_asset = _new_stage(tmp_path / "set_ok.usda")
+    set_asset.SetDefaultPrim(set_asset.DefinePrim("/Set"))
+    set_asset.GetRootLayer().subLayerPaths.append("./lookdev_missing.usda")
+    _save(set_asset)
     stage = _new_stage(tmp_path / "set.usda")
+    UsdGeom.Xform.Define(stage, "/World").GetPrim().GetReferences().AddReference(
+        "./world_missing.usda")
     UsdGeom.Camera.Define(stage, "/World/cam").AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
     stage.DefinePrim("/World/set").GetReferences().AddReference("./set_missing.usda")
+    stage.DefinePrim("/World/set2").GetReferences().AddReference("./set_ok.usda")
     shot = read_shot(_save(stage))
     np.testing.assert_allclose(shot.cam2world[0, :3, 3], [1.0, 2.0, 3.0])
+    (parent,) = [w for w in shot.warnings if "a parent of the camera /World/cam" in w]
+    assert "world_missing.usda" in parent
+    (elsewhere,) = [w for w in shot.warnings if "away from the camera (2 error(s))" in w]
+    assert "set_missing.usda" in elsewhere or "lookdev_missing.usda" in elsewhere
 
 
 @pytest.mark.parametrize(("start", "end", "frames"), [
@@ -810,3 +833,21 @@ def test_a_camera_layer_in_other_units_is_named(tmp_path: Path) -> None:
         if warned:
             assert ("written with metersPerUnit 1 (the stage's: 0.01) and upAxis Z (the "
                     "stage's: Y)") in named[0]
+
+
+def test_a_set_layer_in_other_units_that_does_not_move_the_camera_is_not_named(
+        tmp_path: Path) -> None:
+    """A set-dressing sublayer in centimetres, Y-up, that defines /World (the camera's
+    parent) and a box, but no transform of /World: nothing of the move comes from it (a
+    reviewer's case)."""
+    dressing = _new_stage(tmp_path / "set_cm.usda", up_axis="Y", meters_per_unit=0.01)
+    UsdGeom.Xform.Define(dressing, "/World")
+    UsdGeom.Cube.Define(dressing, "/World/set/box")
+    _save(dressing)
+    stage = _new_stage(tmp_path / "shot.usda")
+    stage.GetRootLayer().subLayerPaths.append("./set_cm.usda")
+    op = UsdGeom.Camera.Define(stage, "/World/cam").AddTranslateOp()
+    for f in range(1, 11):
+        op.Set(Gf.Vec3d(0.1 * f, 0.0, 1.5), f)
+    shot = read_shot(_save(stage))
+    assert not [w for w in shot.warnings if "set_cm.usda" in w], shot.warnings
