@@ -45,12 +45,10 @@ class Placement:
     @classmethod
     def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,
                      source: str = "--placement") -> Placement:
-        a = math.radians(yaw_deg)
-        T = np.eye(4)
-        T[:3, :3] = [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                     [0.0, 0.0, 1.0]]
-        T[:3, 3] = (x, y, z)
-        return cls(T, source)
+        """x, y, z [m] and yaw [deg] about up, as a set file's ``[placement]`` means them."""
+        from camtraj.set_file import yaw_pose
+
+        return cls(yaw_pose(x, y, z, yaw_deg), source)
 
     def describe(self) -> dict[str, Any]:
         R = self.base2world[:3, :3]
@@ -83,6 +81,7 @@ class Analysis:
     timings: dict[str, float] = field(default_factory=dict)
     collision: dict[str, Any] | None = None  # what the collision check found, if it ran
     lens_q: Array | None = None  # (n, lens axes) lens motor positions per frame [rad]
+    warnings: list[str] | None = None  # convert.run_warnings, once the take is made
 
 
 def axis_value(name: str, value: float) -> float:

@@ -124,7 +124,9 @@ def load_placement(options: ConvertOptions) -> Placement:
     if options.placement is not None:
         x, y, z, yaw = options.placement
         given = Placement.from_xyz_yaw(x, y, z, yaw)
-        if from_file is None or np.array_equal(from_file.base2world, given.base2world):
+        # the same place however written (a rotation matrix, yaw 360 against 0): no warning
+        if from_file is None or np.allclose(from_file.base2world, given.base2world,
+                                            rtol=0.0, atol=1e-9):
             return given
         return replace(given, overrides=placement_text(from_file.describe()))
     return from_file or Placement()
@@ -146,56 +148,70 @@ def _turns(a: Array, b: Array) -> Array:
 def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> list[str]:
     """Where the camera jumps: a frame off the path alone (a bad or blocked key: the camera
     goes away on one frame and comes straight back, so its two steps are equal and neither is
-    a jump against the other), then a step between two frames (a cut left in the shot). A
+    a jump against the other), and a step between two frames (a cut left in the shot). A
     jump is a translation or rotation :data:`CUT_RATIO` times the largest step within
-    ``around`` frames of it (for a frame off the path, and the step from the frame before it
-    to the frame after it), and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`. One line per
-    jump, then one with the ``--frames`` ranges of the parts between the cuts."""
+    ``around`` frames of it (for a frame off the path: of its two steps, and the step from the
+    frame before it to the frame after it), and above :data:`CUT_MIN_M` / :data:`CUT_MIN_RAD`;
+    a frame off the path at a cut is both. One line per jump, then one with the ``--frames``
+    ranges of the parts between the cuts (without the frames off the path there)."""
     n = targets.shape[0]
     if n < 3:
         return []
-    move = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
-    turn = _turns(targets[:-1], targets[1:])
-    move2 = np.linalg.norm(targets[2:, :3, 3] - targets[:-2, :3, 3], axis=1)
-    turn2 = _turns(targets[:-2], targets[2:])
-    big = (move > CUT_MIN_M) | (turn > CUT_MIN_RAD)  # the only steps that can be jumps
-    out, after, popped = [], [], set()
-    # frame k off the path alone: steps k - 1 (there) and k (back)
-    for k in (np.flatnonzero(big[:-1] & big[1:]) + 1).tolist():
-        lo, hi = max(0, k - 1 - around), min(n - 1, k + 1 + around)
-        for step, across, floor, unit in ((move, move2, CUT_MIN_M, "m"),
-                                          (turn, turn2, CUT_MIN_RAD, "deg")):
-            away = min(step[k - 1], step[k])
-            others = np.concatenate([step[lo:k - 1], step[k + 1:hi], across[k - 1:k]])
-            if away > floor and away > CUT_RATIO * float(others.max()):
-                size = (f"{away:.3f} m" if unit == "m" else f"{math.degrees(away):.1f} deg")
-                out.append(f"the camera jumps {size} off its path on frame {int(frames[k])} "
-                           f"alone and back (frames {int(frames[k - 1])} and "
-                           f"{int(frames[k + 1])} agree): a bad or blocked key at frame "
-                           f"{int(frames[k])}?")
-                popped |= {k - 1, k}
-                break
-    for k in np.flatnonzero(big).tolist():
-        if k in popped:
-            continue
-        lo, hi = max(0, k - around), min(n - 1, k + around + 1)
-        for step, floor, text in ((move, CUT_MIN_M, f"{move[k]:.3f} m"),
-                                  (turn, CUT_MIN_RAD, f"{math.degrees(turn[k]):.1f} deg")):
-            others = np.concatenate([step[lo:k], step[k + 1:hi]])
-            near = float(others.max()) if others.size else 0.0
-            if step[k] > floor and step[k] > CUT_RATIO * near:
-                ratio = (f"{step[k] / near:.0f}x the steps around it" if near > 1e-6 * floor
-                         else "the camera holds still around it")
-                out.append(f"the camera jumps {text} between frames {int(frames[k])} and "
-                           f"{int(frames[k + 1])} ({ratio}): a cut in the shot?")
-                after.append(k)
-                break
-    if after:
-        firsts, lasts = [0, *(k + 1 for k in after)], [*after, n - 1]
+    kinds = []  # per kind: steps, steps across a frame, floor, unit; the steps either side
+    for steps, across, floor, unit in (
+            (np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1),
+             np.linalg.norm(targets[2:, :3, 3] - targets[:-2, :3, 3], axis=1), CUT_MIN_M, "m"),
+            (_turns(targets[:-1], targets[1:]), _turns(targets[:-2], targets[2:]), CUT_MIN_RAD,
+             "deg")):
+        padded = np.concatenate([np.zeros(around), steps, np.zeros(around)])
+        window = np.lib.stride_tricks.sliding_window_view(padded, around).max(axis=-1)
+        before, after = window[:-around - 1], window[around + 1:]  # the steps on either side
+        kinds.append((steps, across, floor, unit, before, after))
+    pops: dict[int, str] = {}  # frame index -> its line
+    for steps, across, floor, unit, before, after in kinds:
+        away = np.minimum(steps[:-1], steps[1:])  # frame k = 1 .. n - 2: there and back
+        others = np.maximum(np.maximum(before[:-1], after[1:]), across)
+        for k in (np.flatnonzero((away > floor) & (away > CUT_RATIO * others)) + 1).tolist():
+            agree = all(float(a[k - 1]) <= f for _, a, f, *_ in kinds)
+            pops.setdefault(k, (
+                f"the camera jumps {_jump(float(away[k - 1]), unit)} off its path on frame "
+                f"{int(frames[k])} alone and back"
+                + (f" (frames {int(frames[k - 1])} and {int(frames[k + 1])} agree)" if agree
+                   else "") + f": a bad or blocked key at frame {int(frames[k])}?"))
+    cuts: dict[int, tuple[int, str]] = {}  # last frame before a cut -> (first after, its line)
+    for steps, across, floor, unit, before, after in kinds:
+        near = np.maximum(before, after)
+        for k in np.flatnonzero((steps > floor) & (steps > CUT_RATIO * near)).tolist():
+            if k in pops or k + 1 in pops or k in cuts:
+                continue  # a step to or from a frame off the path
+            ratio = (f"{steps[k] / near[k]:.0f}x the steps around it" if near[k] > 1e-6 * floor
+                     else "the camera holds still around it")
+            cuts[k] = (k + 1, f"the camera jumps {_jump(float(steps[k]), unit)} between frames "
+                              f"{int(frames[k])} and {int(frames[k + 1])} ({ratio}): a cut in "
+                              f"the shot?")
+        # across a frame off the path: the frames either side of it are apart as at a cut
+        others = np.maximum(before[:-1], after[1:])
+        for k in pops:
+            if (k - 1 not in cuts and across[k - 1] > floor
+                    and across[k - 1] > CUT_RATIO * others[k - 1]):
+                size = _jump(float(across[k - 1]), unit)
+                cuts[k - 1] = (k + 1, f"the camera jumps {size} between frames "
+                                      f"{int(frames[k - 1])} and {int(frames[k + 1])} across "
+                                      f"frame {int(frames[k])}: a cut in the shot?")
+    out = [pops[k] for k in sorted(pops)] + [cuts[k][1] for k in sorted(cuts)]
+    if cuts:
+        ends = sorted(cuts)
+        firsts = [0, *(cuts[k][0] for k in ends)]
+        lasts = [*ends, n - 1]
         parts = ", ".join(f"--frames {int(frames[a])}:{int(frames[b])}"
                           for a, b in zip(firsts, lasts, strict=True))
         out.append(f"to split the shot there, convert each part on its own: {parts}")
     return out
+
+
+def _jump(size: float, unit: str) -> str:
+    """A jump's size as :func:`camera_cuts` says it: metres, or a turn in degrees."""
+    return f"{size:.3f} m" if unit == "m" else f"{math.degrees(size):.1f} deg"
 
 
 @contextmanager
@@ -449,7 +465,14 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
 
 
 def run_warnings(analysis: Analysis) -> list[str]:
-    """Things a person should know about a finished run that do not stop the take."""
+    """Things a person should know about a finished run that do not stop the take (worked
+    out once per run: the metadata, the summary and the report each ask)."""
+    if analysis.warnings is None:
+        analysis.warnings = _run_warnings(analysis)
+    return list(analysis.warnings)
+
+
+def _run_warnings(analysis: Analysis) -> list[str]:
     take, shot, path = analysis.take, analysis.shot, analysis.path
     assert take is not None and path is not None
     warnings = [*shot.warnings, *take.report.warnings]

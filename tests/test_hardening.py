@@ -694,12 +694,35 @@ def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
     eased = 90.0 * (0.5 - 0.5 * np.cos(np.pi * u))
     pop = poses(eased)
     pop[11, :3, 3] = 0.0  # frame 12 at the stage origin
-    assert camera_cuts(pop, frames) == [
+    assert camera_cuts(pop, frames) == [  # mid-pan: frames 11 and 13 are 39 deg apart
         f"the camera jumps {np.linalg.norm(pop[10, :3, 3]):.3f} m off its path on frame 12 "
-        "alone and back (frames 11 and 13 agree): a bad or blocked key at frame 12?"]
+        "alone and back: a bad or blocked key at frame 12?"]
     assert camera_cuts(poses(np.where(frames == 12, 180.0, 0.0)), frames) == [
         "the camera jumps 180.0 deg off its path on frame 12 alone and back (frames 11 and 13 "
         "agree): a bad or blocked key at frame 12?"]
+    # a frame off the path at a cut (a reviewer's case): both, and the parts leave it out
+    at_cut = poses(np.zeros(24))
+    at_cut[12:, 0, 3] = 4.5
+    at_cut[11, :3, 3] = 0.0
+    assert camera_cuts(at_cut, frames) == [
+        f"the camera jumps {np.linalg.norm(at_cut[10, :3, 3]):.3f} m off its path on frame 12 "
+        "alone and back: a bad or blocked key at frame 12?",
+        "the camera jumps 0.500 m between frames 11 and 13 across frame 12: a cut in the shot?",
+        "to split the shot there, convert each part on its own: --frames 1:11, --frames 13:24"]
+    # a long, fast, uneven move (every step over the 5 cm / 5 deg floors: the steps around
+    # each are windows, not a loop per frame) with one frame off it and one cut
+    rng = np.random.default_rng(3)
+    long = poses(np.cumsum(rng.uniform(0.0, 9.0, 3000)))
+    long[:, 0, 3] += np.cumsum(rng.uniform(0.06, 0.2, 3000))
+    long[1500, 2, 3] += 7.0
+    long[2200:, 1, 3] += 3.0
+    got = camera_cuts(long, np.arange(3000))
+    assert len(got) == 3, got
+    assert got[0].startswith("the camera jumps 7.0") and got[0].endswith(
+        " m off its path on frame 1500 alone and back: a bad or blocked key at frame 1500?")
+    assert got[1].startswith("the camera jumps 3.0") and " between frames 2199 and 2200 (" in got[1]
+    assert got[2] == ("to split the shot there, convert each part on its own: --frames 0:2199, "
+                      "--frames 2200:2999")
 
 
 def _no_constant(name: str) -> None:
