@@ -19,9 +19,11 @@ such lines (elapsed times) out of the examples.
 Round-off: the same shot solved on another CPU (other BLAS kernels, other SIMD maths in numpy
 and libm) gives a joint path that differs by about the refinement's own tolerance, a
 thousandth, and a number printed to four digits can move in its last one (under AVX2
-instead of AVX-512 kernels, the whip sample's elbow margin 26.636 -> 26.690 deg). Each
-number may differ by one unit of its last printed digit or by :data:`NUMBER_RTOL` of itself;
-the words between them, and how many numbers there are, may not.
+instead of AVX-512 kernels, the whip sample's elbow margin 26.636 -> 26.690 deg). A measured
+number (one with decimals, or a whole number with a unit after it: 72%, 7807 deg/s^2) may
+differ by one unit of its last printed digit or by :data:`NUMBER_RTOL` of itself; a bare
+whole number (a frame, a count, an exit code) may not, nor may the words between numbers or
+how many there are.
 """
 
 from __future__ import annotations
@@ -111,11 +113,13 @@ NUMBER_RTOL = 0.01
 """How far a printed number may move with the machine's round-off (:func:`agrees`)."""
 
 _NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
+_UNIT_AFTER = re.compile(r" ?(?:%|x\b|m\b|mm\b|deg|s\b|ms\b|Hz|fps|µ)")
 
 
 def agrees(expected: str, got: str) -> bool:
     """Whether a transcript is the expected one up to round-off: the same lines and words,
-    each number within one unit of its last printed digit or :data:`NUMBER_RTOL` of it."""
+    each measured number within one unit of its last printed digit or :data:`NUMBER_RTOL` of
+    it, every bare whole number the same."""
     if expected == got:
         return True
     old, new = expected.splitlines(), got.splitlines()
@@ -130,6 +134,11 @@ def agrees(expected: str, got: str) -> bool:
         if len(xs) != len(ys):
             return False
         for x, y in zip(xs, ys, strict=True):
+            measured = x.group(1) is not None or _UNIT_AFTER.match(a, x.end()) is not None
+            if not measured:
+                if x.group(0) != y.group(0):  # a frame number, a count: exactly
+                    return False
+                continue
             unit = 10.0 ** -max(len(x.group(1) or ""), len(y.group(1) or ""))
             u, v = float(x.group(0)), float(y.group(0))
             if abs(u - v) > max(unit * (1 + 1e-9), NUMBER_RTOL * abs(u)):

@@ -71,6 +71,14 @@ def test_round_off_agrees_and_a_real_change_does_not() -> None:
     assert not agrees("speed factor 3.952\n", "speed factor 3.992\n")  # 1%: a real change
     assert not agrees("maximum feasible speed 350%\n", "maximum feasible speed 340%\n")
     assert not agrees("frames 16-24\n", "frames 16-26\n")
+    assert agrees("pan acceleration 7802 deg/s^2 on frames 16-24\n",
+                  "pan acceleration 7808 deg/s^2 on frames 16-24\n")
+    # frames, counts and exit codes are not measurements: off by one is a real change
+    assert not agrees("frames 16-24\n", "frames 16-25\n")
+    assert not agrees("18 frame(s) cannot be reached (frames 29-46); worst: frame 30\n",
+                      "19 frame(s) cannot be reached (frames 29-47); worst: frame 31\n")
+    assert not agrees("frames 1001-1120 (120 at 24 fps)\n", "frames 1010-1131 (121 at 24 fps)\n")
+    assert not agrees("exit 2\n", "exit 3\n")
     assert not agrees("timing shot: take\n", "timing scale: take\n")
     assert not agrees("margin 2.5 deg\n", "margin 2.5 deg (frame 3)\n")
     assert not agrees("a\nb\n", "a\n")
