@@ -342,6 +342,30 @@ def test_scale_factor_each_quantity(limits: Limits, binding: str) -> None:
     assert_within_limits_by_differences(take, limits, jerk=True)
 
 
+@pytest.mark.parametrize("mode", ["scale", "optimal"])
+def test_a_move_a_thousand_times_too_fast_is_one_error_not_hours_of_samples(
+        limits: Limits, mode: str) -> None:
+    """The bump at 1.6x the rotate velocity against a limit 10,000x smaller (a robot file
+    typed in the wrong unit): the take would be 16,000x slower than real time, 22 h of
+    samples (gigabytes: a new user's check was killed). It is refused before any is made."""
+    k, t0, width = 1.6, 1.0, 3.0
+    t, q = bump_path(121, k, float(limits.velocity[ROTATE]), t0, width)
+    slow = Limits(limits.lower, limits.upper, limits.velocity * 1e-4, limits.acceleration,
+                  limits.jerk)
+    tracemalloc.start()
+    try:
+        with pytest.raises(TimingLimitError, match=r"the move fits only 1\.6e\+04 times slower "
+                           r"than real time \(a take of 22\.2 h\), more than the 1000 times "
+                           r"--timing scale slows a move") as err:
+            time_shot(q, t, slow, mode=mode)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50e6, peak
+    assert err.value.scale_factor == math.inf  # nothing advises --timing scale
+    assert err.value.max_speed == pytest.approx(1.0 / 1.6e4, rel=1e-3)
+
+
 def test_scale_keeps_a_fitting_shot_at_speed(limits: Limits) -> None:
     t, q = sinusoid(49, np.full(8, 0.01), 1.0)
     take = time_shot(q, t, limits, mode="scale")

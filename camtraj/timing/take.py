@@ -731,6 +731,18 @@ def _uniform_length(take: tuple[float, int, Samples, Array, Edge, Edge], n: int,
     return float((up.q.shape[0] + out.q.shape[0]) * factor * dt / ticks + (n - 1) * factor * dt)
 
 
+def _too_slow(factor: float, n: int, dt: float) -> TimingLimitError:
+    """The error for a move that fits only more than :data:`MAX_SCALE` times slower than
+    real time: a take of hours, whose samples alone would fill the memory (a velocity limit
+    typed a thousand times too small, say)."""
+    hours = factor * max(n - 1, 1) * dt / 3600.0
+    msg = (f"the move fits only {factor:.3g} times slower than real time (a take of "
+           f"{hours:.3g} h), more than the {MAX_SCALE:g} times --timing scale slows a move: "
+           f"check the robot's velocity, acceleration and jerk limits")
+    return TimingLimitError(msg, max_speed=1.0 / factor, feasible_fps=1.0 / (factor * dt),
+                            scale_factor=math.inf)
+
+
 def _scale(
     path: FramePath, dt: float, rate: float, limits: Limits, factor: float, fit: _EdgeFit,
     start: Array | None, ends: tuple[str, ...], floor: float = 1.0,
@@ -751,6 +763,8 @@ def _scale(
     s = max(floor, factor)
     frames = np.array(fit.frames, dtype=np.int64)
     for _ in range(40):
+        if s > MAX_SCALE:  # before a grid of its samples is made (hours of them, gigabytes)
+            raise _too_slow(s, path.n, dt)
         ticks = max(1, round(rate * s * dt))
         grid = _Grid.of(path, ticks, 1.0 / (s * dt))
         k = grid.slowdown(limits)
