@@ -391,7 +391,22 @@ def info(mcap_file: str, as_json: bool) -> None:
     lines += [f"  {t['topic']:<20} {t['type']:<40} {t['count']:>7} messages"
               for t in d["topics"]]
     lines += _limits_used(d)
+    lines += _controller_counts(d.get("controller"))
     click.echo("\n".join(lines))
+
+
+def _controller_counts(controller: dict[str, Any] | None) -> list[str]:
+    """``camtraj info``: each axis's motor counts (the robot or lens file's
+    ``[controller.AXIS]``) and the range of them the take commands."""
+    if not controller:
+        return []
+    lines = ["controller counts (counts = offset + sign x scale x q, q in m or rad; the "
+             "take's range, run-up and run-out included):"]
+    for name, c in controller.items():
+        lo, hi = c["counts_range"]
+        lines.append(f"  {name:<8} {c['offset']:g} {'+' if c['sign'] > 0 else '-'} "
+                     f"{c['scale']:g} x q   [{lo:.0f}, {hi:.0f}]")
+    return lines
 
 
 @main.command("report")

@@ -434,6 +434,7 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
     take, shot, robot = analysis.take, analysis.shot, analysis.robot
     assert take is not None and analysis.path is not None
     mount = {"camera2flange": robot.camera2flange.tolist()}
+    counts = controller_counts(analysis)
     return {
         "source_file": str(shot_path),
         "camera_prim": shot.camera_path,
@@ -461,7 +462,28 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
                                     sort_keys=True),
         # With a lens only: its axes after the joints, their units and calibrated ranges.
         **({} if robot.lens is None else {"lens": json.dumps(robot.lens.describe())}),
+        # With [controller.AXIS] units only: each axis's counts = offset + sign * scale * q
+        # and the range of counts the whole take (run-up and run-out included) commands.
+        **({"controller": json.dumps(counts, sort_keys=True)} if counts else {}),
     }
+
+
+def controller_counts(analysis: Analysis) -> dict[str, dict[str, Any]]:
+    """Per axis with controller units (the robot file's ``[controller.AXIS]``, the lens
+    file's): the units and the lowest and highest motor count the take commands."""
+    take, robot = analysis.take, analysis.robot
+    assert take is not None
+    q = take.q  # (samples, axes): the joints, then any lens motors
+    units = dict(robot.controller)
+    if robot.lens is not None:
+        units |= {a.name: a.controller for a in robot.lens.axes if a.controller is not None}
+    names = [*JOINT_NAMES, *(a.name for a in robot.lens.axes)] if robot.lens else [*JOINT_NAMES]
+    out = {}
+    for name, unit in units.items():
+        counts = unit.counts(q[:, names.index(name)])
+        out[name] = {"scale": unit.scale, "offset": unit.offset, "sign": unit.sign,
+                     "counts_range": [float(counts.min()), float(counts.max())]}
+    return out
 
 
 def run_warnings(analysis: Analysis) -> list[str]:

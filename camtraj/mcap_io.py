@@ -1592,6 +1592,7 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
         "limits": limits,
         "peak_use": _json_or_none(take_md.get("peak_use")),
         "position_range": _json_or_none(take_md.get("position_range")),
+        "controller": _json_or_none(take_md.get("controller")),
         "metadata": take_md,
     }
 

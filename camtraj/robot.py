@@ -393,9 +393,10 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
             raise fail(f"{key}.home", f"= {jt.get('home')}: outside [{jt['min']}, {jt['max']}]")
     elbow = JOINT_NAMES.index("elbow")
     if cols["min"][elbow] < -math.pi - 1e-9 or cols["max"][elbow] > 1e-9:
-        raise fail(
-            "joints.elbow", "limits must lie inside [-180, 0] deg (the mechanism's range)"
-        )
+        given = f"[{cols['min'][elbow] / ang:g}, {cols['max'][elbow] / ang:g}] {unit}"
+        inside = "[-180, 0] deg" if unit == "deg" else f"[{-math.pi:.6g}, 0] rad"
+        raise fail("joints.elbow", f"min and max = {given}: must lie inside {inside} (the "
+                   "mechanism's range)")
 
     mount = _table(data, "mount", where, required=True)
     _no_unknown(mount, {"rotation", "offset"}, where, "[mount]")
@@ -403,8 +404,11 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         if key not in mount:
             raise fail(f"mount.{key}", "is missing")
     rot = _array(mount["rotation"], (3, 3), "mount.rotation", "a 3x3 matrix of numbers", where)
-    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise fail("mount.rotation", "must be a proper rotation (orthonormal, det +1)")
+    off = float(np.abs(rot @ rot.T - np.eye(3)).max())
+    if off > 1e-6 or np.linalg.det(rot) < 0:
+        raise fail("mount.rotation", "must be a proper rotation (orthonormal, det +1): "
+                   + (f"R R^T is {off:.2g} from the identity, more than 1e-06 (give its "
+                      "entries to 7 or more decimals)" if off > 1e-6 else "it is mirrored"))
     offset = _array(mount["offset"], (3,), "mount.offset", "three numbers [m]", where)
     if np.abs(offset).max() > 5:
         raise fail("mount.offset", "must be three numbers [m], each within ±5 m")
@@ -426,13 +430,15 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         if "scale" not in ct:
             raise fail(f"{key}.scale", "is missing")
         sign = ct.get("sign", 1)
-        if sign not in (1, -1):
+        if sign not in (1, -1) or isinstance(sign, bool):
             raise fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
+        scale = _number(ct["scale"], f"{key}.scale", where)
+        if not scale > 0.0:
+            raise fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per metre or "
+                       "radian; sign gives the direction)")
         controller[jname] = ControllerUnits(
-            scale=_number(ct["scale"], f"{key}.scale", where),
-            offset=_number(ct.get("offset", 0.0), f"{key}.offset", where),
-            sign=int(sign),
-        )
+            scale=scale, offset=_number(ct.get("offset", 0.0), f"{key}.offset", where),
+            sign=int(sign))
 
     lens = None
     if "lens" in data:

@@ -734,3 +734,44 @@ def test_the_placement_is_shown_and_placement_over_a_set_file_says_what_it_repla
     assert "  placement x 0.050 m" in runs["same"].stdout  # the same place: nothing replaced
     assert "warning" not in runs["same"].stdout
     assert "placement" not in runs["none"].stdout  # the stage origin, as in the README
+
+
+def test_controller_counts_are_recorded_for_the_take(tmp_path: Path) -> None:
+    """The robot file's [controller.AXIS] units (counts = offset + sign scale q) reach the
+    file: the metadata and `info` give each axis's units and the range of counts the take
+    commands, here checked against the /joint_states an independent reader decodes (they
+    were read, then used nowhere: a new user's controller engineer found them in no output).
+    A scale that is not positive is a robot file error."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    robot = tmp_path / "robot.toml"
+    base = (ROOT / "camtraj" / "data" / "robot.toml").read_text(encoding="utf-8")
+    robot.write_text(base + "\n[controller.track]\nscale = 1284092.0\noffset = 1000.0\n"
+                     "sign = -1\n\n[controller.pan]\nscale = 52152.0\n", encoding="utf-8")
+    out = tmp_path / "crane.mcap"
+    conv = run_cli("convert", SHOTS / "blender_crane_up.usda", "-o", out, "--robot", robot, "-q")
+    assert conv.returncode == 0, conv.stderr
+    q = []
+    with out.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _schema, _channel, _message, msg in reader.iter_decoded_messages(
+                topics=["/joint_states"]):
+            names = list(msg.name)
+            q.append(list(msg.position))
+    qa = np.array(q)
+    track = 1000.0 - 1284092.0 * qa[:, names.index("track")]
+    pan = 52152.0 * qa[:, names.index("pan")]
+    info = run_cli("info", out, "--json")
+    counts = json.loads(info.stdout)["controller"]
+    assert sorted(counts) == ["pan", "track"]
+    assert counts["track"]["counts_range"] == pytest.approx([track.min(), track.max()],
+                                                           rel=1e-12)
+    assert counts["pan"]["counts_range"] == pytest.approx([pan.min(), pan.max()], rel=1e-12)
+    text = run_cli("info", out).stdout
+    assert (f"  track    1000 - 1.28409e+06 x q   [{track.min():.0f}, {track.max():.0f}]"
+            in text), text
+    robot.write_text(base + "\n[controller.track]\nscale = 0.0\n", encoding="utf-8")
+    bad = run_cli("check", SHOTS / "blender_crane_up.usda", "--robot", robot)
+    assert bad.returncode == 2
+    assert "[controller.track.scale] = 0: must be positive" in bad.stderr, bad.stderr

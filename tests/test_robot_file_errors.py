@@ -270,3 +270,24 @@ def test_convert_starts_the_take_at_the_given_vector(tmp_path: Path) -> None:
     assert list(first.name) == list(JOINT_NAMES)
     np.testing.assert_allclose(first.position, start_si, atol=1e-12)
     np.testing.assert_allclose(first.velocity, 0.0, atol=1e-12)
+
+
+def test_rotation_and_elbow_errors_say_by_how_much_in_the_files_unit(tmp_path: Path) -> None:
+    """A mount rotation typed to four decimals (the default tilted 8 deg) says how far from
+    a rotation it is and what to do; an elbow range outside the mechanism's says the range
+    given, in the file's own angle unit (a new user's radians file was told degrees)."""
+    mount = "rotation = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]"
+    tilted = ("rotation = [[0.0, 0.9903, 0.1392], [1.0, 0.0, 0.0], "
+              "[0.0, 0.1392, -0.9903]]")
+    message = _error(_write(tmp_path, TEMPLATE.replace(mount, tilted, 1)))
+    assert "[mount.rotation]" in message and "from the identity, more than 1e-06" in message
+    assert "7 or more decimals" in message
+    unit = 'angle_unit = "deg"'
+    assert unit in TEMPLATE
+    message = _error(_write(tmp_path, TEMPLATE.replace(unit, 'angle_unit = "rad"', 1)))
+    assert ("[joints.elbow] min and max = [-180, 0] rad: must lie inside [-3.14159, 0] rad"
+            in message), message
+    elbow = "min = -180.0   # the papers' physical limit"
+    assert elbow in TEMPLATE
+    message = _error(_write(tmp_path, TEMPLATE.replace(elbow, "min = -190.0 #", 1)))
+    assert "min and max = [-190, 0] deg: must lie inside [-180, 0] deg" in message, message
