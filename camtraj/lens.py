@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from camtraj.errors import InputError, LensFileError, LensRangeError
 from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
-from camtraj.robot import ControllerUnits
+from camtraj.robot import CONTROLLER_KEYS, ControllerUnits, controller_units
 
 if TYPE_CHECKING:
     from camtraj.timing import Limits
@@ -527,16 +527,8 @@ def _with_controller(r: _Reader, controllers: dict[str, Any], axis: LensAxis) ->
         return axis
     key = f"controller.{axis.name}"
     ct = r.table(controllers, axis.name)
-    r.no_unknown(ct, {"scale", "offset", "sign"}, key)
-    scale = r.number(r.required(ct, "scale", key), f"{key}.scale")
-    if not scale > 0.0:
-        raise r.fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per radian; "
-                     "sign gives the direction)")
-    sign = ct.get("sign", 1)
-    if sign not in (1, -1) or isinstance(sign, bool):
-        raise r.fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
-    offset = r.number(ct.get("offset", 0.0), f"{key}.offset")
-    return replace(axis, controller=ControllerUnits(scale=scale, offset=offset, sign=int(sign)))
+    r.no_unknown(ct, set(CONTROLLER_KEYS), key)
+    return replace(axis, controller=controller_units(ct, key, r.number, r.fail))
 
 
 __all__ = [

@@ -8,6 +8,7 @@ z up, joints ordered track, rotate, lift, extend, elbow, pan, tilt, roll. Transf
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -92,6 +93,29 @@ class ControllerUnits:
 
     def counts(self, q: ArrayLike) -> Array:
         return self.offset + self.sign * self.scale * np.asarray(q, dtype=float)
+
+
+CONTROLLER_KEYS = ("scale", "offset", "sign")
+"""The keys of a ``[controller.AXIS]`` table (robot file and lens file alike)."""
+
+
+def controller_units(table: dict[str, Any], key: str, number: Callable[[Any, str], float],
+                     fail: Callable[[str, str], Exception]) -> ControllerUnits:
+    """A ``[controller.AXIS]`` table (``key``) as :class:`ControllerUnits`: ``scale``
+    required and positive (counts per metre or radian; ``sign`` gives the direction),
+    ``offset`` (default 0) and ``sign`` 1 or -1 (default 1). ``number`` reads a value as a
+    finite number and ``fail`` makes the file's error, each naming the key."""
+    if "scale" not in table:
+        raise fail(f"{key}.scale", "is missing")
+    scale = number(table["scale"], f"{key}.scale")
+    if not scale > 0.0:
+        raise fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per metre or "
+                   "radian; sign gives the direction)")
+    sign = table.get("sign", 1)
+    if sign not in (1, -1) or isinstance(sign, bool):
+        raise fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
+    return ControllerUnits(scale=scale, offset=number(table.get("offset", 0.0), f"{key}.offset"),
+                           sign=int(sign))
 
 
 @dataclass(frozen=True)
@@ -426,19 +450,9 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         key = f"controller.{jname}"
         if not isinstance(ct, dict):
             raise fail(key, "must be a table")
-        _no_unknown(ct, {"scale", "offset", "sign"}, where, f"[{key}]")
-        if "scale" not in ct:
-            raise fail(f"{key}.scale", "is missing")
-        sign = ct.get("sign", 1)
-        if sign not in (1, -1) or isinstance(sign, bool):
-            raise fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
-        scale = _number(ct["scale"], f"{key}.scale", where)
-        if not scale > 0.0:
-            raise fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per metre or "
-                       "radian; sign gives the direction)")
-        controller[jname] = ControllerUnits(
-            scale=scale, offset=_number(ct.get("offset", 0.0), f"{key}.offset", where),
-            sign=int(sign))
+        _no_unknown(ct, set(CONTROLLER_KEYS), where, f"[{key}]")
+        controller[jname] = controller_units(
+            ct, key, lambda value, k: _number(value, k, where), fail)
 
     lens = None
     if "lens" in data:
