@@ -53,6 +53,10 @@ UNIFORM_RTOL = 1e-6
 #: ``"scale"`` slows a move by at most this factor; a move whose run-up or run-out still has
 #: no room then has an axis at its limit moving into it (only another IK answer helps).
 MAX_SCALE = 1000.0
+#: The longest take camtraj builds [s]: two hours of samples (1.8 million at 250 Hz, about
+#: 0.7 GB while the take is made). A longer one is a limit typed in the wrong unit, not a
+#: shot: a track velocity of 1e-9 m/s asked for 151 h and was killed for its memory.
+MAX_TAKE_SECONDS = 7200.0
 FACTOR_RTOL = 1e-6  # relative precision of the slow-down the run-up and run-out need
 
 
@@ -732,12 +736,12 @@ def _uniform_length(take: tuple[float, int, Samples, Array, Edge, Edge], n: int,
 
 
 def _too_slow(factor: float, n: int, dt: float) -> TimingLimitError:
-    """The error for a move that fits only more than :data:`MAX_SCALE` times slower than
-    real time: a take of hours, whose samples alone would fill the memory (a velocity limit
+    """The error for a move whose uniform take would last longer than
+    :data:`MAX_TAKE_SECONDS`: hours of samples that would fill the memory (a velocity limit
     typed a thousand times too small, say)."""
     hours = factor * max(n - 1, 1) * dt / 3600.0
-    msg = (f"the move fits only {factor:.3g} times slower than real time (a take of "
-           f"{hours:.3g} h), more than the {MAX_SCALE:g} times --timing scale slows a move: "
+    msg = (f"the move fits only {factor:.3g} times slower than real time: a take of "
+           f"{hours:.3g} h, longer than the {MAX_TAKE_SECONDS / 3600.0:g} h camtraj builds; "
            f"check the robot's velocity, acceleration and jerk limits")
     return TimingLimitError(msg, max_speed=1.0 / factor, feasible_fps=1.0 / (factor * dt),
                             scale_factor=math.inf)
@@ -763,7 +767,7 @@ def _scale(
     s = max(floor, factor)
     frames = np.array(fit.frames, dtype=np.int64)
     for _ in range(40):
-        if s > MAX_SCALE:  # before a grid of its samples is made (hours of them, gigabytes)
+        if s * max(path.n - 1, 1) * dt > MAX_TAKE_SECONDS:  # before a grid of its samples
             raise _too_slow(s, path.n, dt)
         ticks = max(1, round(rate * s * dt))
         grid = _Grid.of(path, ticks, 1.0 / (s * dt))
