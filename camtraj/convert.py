@@ -37,7 +37,7 @@ from camtraj.outputs import OutputSet
 from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
-from camtraj.shown import frame_span
+from camtraj.shown import frame_runs, frame_span
 from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
 from camtraj.usd_shot import Shot, read_shot
 
@@ -192,6 +192,8 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
         # across a frame off the path: the frames either side of it are apart as at a cut
         others = np.maximum(before[:-1], after[1:])
         for k in pops:
+            if k - 1 in pops or k + 1 in pops:
+                continue  # its neighbour is off the path too: no good frame either side
             if (k - 1 not in cuts and across[k - 1] > floor
                     and across[k - 1] > CUT_RATIO * others[k - 1]):
                 size = _jump(float(across[k - 1]), unit)
@@ -203,10 +205,26 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
         ends = sorted(cuts)
         firsts = [0, *(cuts[k][0] for k in ends)]
         lasts = [*ends, n - 1]
-        parts = ", ".join(f"--frames {int(frames[a])}:{int(frames[b])}"
-                          for a, b in zip(firsts, lasts, strict=True))
-        out.append(f"to split the shot there, convert each part on its own: {parts}")
+        # a part of one frame is no shot (convert needs two): it is left out, and said
+        parts = [(a, b) for a, b in zip(firsts, lasts, strict=True) if b > a]
+        kept = np.zeros(n, dtype=bool)
+        for a, b in parts:
+            kept[a:b + 1] = True
+        if parts:
+            left = [(int(frames[a]), int(frames[b])) for a, b in _runs(~kept)]
+            said = (f"frame {left[0][0]}" if len(left) == 1 and left[0][0] == left[0][1]
+                    else frame_runs(left))
+            out.append("to split the shot there, convert each part on its own: "
+                       + ", ".join(f"--frames {int(frames[a])}:{int(frames[b])}"
+                                   for a, b in parts)
+                       + (f" (leaving out {said})" if left else ""))
     return out
+
+
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """The runs (first, last) of True in ``mask``, as indices."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), (edges[1::2] - 1).tolist(), strict=True))
 
 
 def _jump(size: float, unit: str) -> str:

@@ -708,7 +708,16 @@ def test_a_fast_whip_is_not_a_cut_and_a_snap_is() -> None:
         f"the camera jumps {np.linalg.norm(at_cut[10, :3, 3]):.3f} m off its path on frame 12 "
         "alone and back: a bad or blocked key at frame 12?",
         "the camera jumps 0.500 m between frames 11 and 13 across frame 12: a cut in the shot?",
-        "to split the shot there, convert each part on its own: --frames 1:11, --frames 13:24"]
+        "to split the shot there, convert each part on its own: --frames 1:11, --frames 13:24 "
+        "(leaving out frame 12)"]
+    # the same at frame 2: a part of one frame is no shot (convert needs two): left out
+    early = poses(np.zeros(24))
+    early[2:, 0, 3] = 4.5
+    early[1, :3, 3] = 0.0
+    assert camera_cuts(early, frames)[1:] == [
+        "the camera jumps 0.500 m between frames 1 and 3 across frame 2: a cut in the shot?",
+        "to split the shot there, convert each part on its own: --frames 3:24 (leaving out "
+        "frames 1-2)"]
     # a long, fast, uneven move (every step over the 5 cm / 5 deg floors: the steps around
     # each are windows, not a loop per frame) with one frame off it and one cut
     rng = np.random.default_rng(3)
