@@ -528,7 +528,7 @@ def _with_controller(r: _Reader, controllers: dict[str, Any], axis: LensAxis) ->
     key = f"controller.{axis.name}"
     ct = r.table(controllers, axis.name)
     r.no_unknown(ct, set(CONTROLLER_KEYS), key)
-    return replace(axis, controller=controller_units(ct, key, r.number, r.fail))
+    return replace(axis, controller=controller_units(ct, key, r.number, r.fail, "radian"))
 
 
 __all__ = [

@@ -100,17 +100,19 @@ CONTROLLER_KEYS = ("scale", "offset", "sign")
 
 
 def controller_units(table: dict[str, Any], key: str, number: Callable[[Any, str], float],
-                     fail: Callable[[str, str], Exception]) -> ControllerUnits:
+                     fail: Callable[[str, str], Exception],
+                     per: str = "metre or radian") -> ControllerUnits:
     """A ``[controller.AXIS]`` table (``key``) as :class:`ControllerUnits`: ``scale``
     required and positive (counts per metre or radian; ``sign`` gives the direction),
     ``offset`` (default 0) and ``sign`` 1 or -1 (default 1). ``number`` reads a value as a
-    finite number and ``fail`` makes the file's error, each naming the key."""
+    finite number and ``fail`` makes the file's error, each naming the key; ``per``: the
+    axis's unit, as the scale's error says it."""
     if "scale" not in table:
         raise fail(f"{key}.scale", "is missing")
     scale = number(table["scale"], f"{key}.scale")
     if not scale > 0.0:
-        raise fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per metre or "
-                   "radian; sign gives the direction)")
+        raise fail(f"{key}.scale", f"= {scale:g}: must be positive (counts per {per}; "
+                   "sign gives the direction)")
     sign = table.get("sign", 1)
     if sign not in (1, -1) or isinstance(sign, bool):
         raise fail(f"{key}.sign", f"= {sign!r}: must be 1 or -1")
@@ -430,9 +432,12 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
     rot = _array(mount["rotation"], (3, 3), "mount.rotation", "a 3x3 matrix of numbers", where)
     off = float(np.abs(rot @ rot.T - np.eye(3)).max())
     if off > 1e-6 or np.linalg.det(rot) < 0:
+        why = [f"R R^T is {off:.2g} from the identity, more than 1e-06"
+               + (" (give its entries to 7 or more decimals)" if off < 1e-3 else "")
+               if off > 1e-6 else "", "it is mirrored (det < 0)" if np.linalg.det(rot) < 0
+               else ""]
         raise fail("mount.rotation", "must be a proper rotation (orthonormal, det +1): "
-                   + (f"R R^T is {off:.2g} from the identity, more than 1e-06 (give its "
-                      "entries to 7 or more decimals)" if off > 1e-6 else "it is mirrored"))
+                   + "; ".join(w for w in why if w))
     offset = _array(mount["offset"], (3,), "mount.offset", "three numbers [m]", where)
     if np.abs(offset).max() > 5:
         raise fail("mount.offset", "must be three numbers [m], each within ±5 m")

@@ -20,7 +20,8 @@ Round-off: the same shot solved on another CPU (other BLAS kernels, other SIMD m
 and libm) gives a joint path that differs by about the refinement's own tolerance, a
 thousandth, and a number printed to four digits can move in its last one (under AVX2
 instead of AVX-512 kernels, the whip sample's elbow margin 26.636 -> 26.690 deg). A measured
-number (one with decimals, or a whole number with a unit after it: 72%, 7807 deg/s^2) may
+number (one with decimals, or a whole number with a unit after it but fps or Hz, which are
+settings: 72%, 7807 deg/s^2) may
 differ by one unit of its last printed digit or by :data:`NUMBER_RTOL` of itself; a bare
 whole number (a frame, a count, an exit code) may not, nor may the words between numbers or
 how many there are. A block of a move faster than the robot can move more: the axes that do
@@ -47,7 +48,7 @@ DOCUMENTS = (ROOT / "README.md", ROOT / "pipelines" / "README.md")
 REGENERATE = "make readme"
 """How to bring the examples up to date (the command the test's failure message names)."""
 
-_FENCE = re.compile(r"^(?:<!-- round-off: (\d+)% -->\n)?```console\n(.*?)^```\n",
+_FENCE = re.compile(r"^(?:<!-- round-off: (\d+(?:\.\d+)?)% -->\n)?```console\n(.*?)^```\n",
                     re.MULTILINE | re.DOTALL)
 PROMPT = "$ "
 
@@ -84,7 +85,7 @@ def blocks(document: Path) -> list[Block]:
     """The console blocks of ``document``, in order."""
     text = document.read_text(encoding="utf-8")
     return [Block(document, m.start(2), m.end(2), m.group(2),
-                  NUMBER_RTOL if m.group(1) is None else int(m.group(1)) / 100.0)
+                  NUMBER_RTOL if m.group(1) is None else float(m.group(1)) / 100.0)
             for m in _FENCE.finditer(text)]
 
 
@@ -121,7 +122,7 @@ NUMBER_RTOL = 0.01
 """How far a printed number may move with the machine's round-off (:func:`agrees`)."""
 
 _NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
-_UNIT_AFTER = re.compile(r" ?(?:%|x\b|m\b|mm\b|deg|s\b|ms\b|Hz|fps|µ)")
+_UNIT_AFTER = re.compile(r" ?(?:%|x\b|m\b|mm\b|deg|s\b|ms\b|µ)")  # not fps, Hz: settings
 
 
 def agrees(expected: str, got: str, rtol: float | None = None) -> bool:
@@ -149,7 +150,8 @@ def agrees(expected: str, got: str, rtol: float | None = None) -> bool:
                 continue
             unit = 10.0 ** -max(len(x.group(1) or ""), len(y.group(1) or ""))
             u, v = float(x.group(0)), float(y.group(0))
-            if abs(u - v) > max(unit * (1 + 1e-9), (rtol or NUMBER_RTOL) * abs(u)):
+            tolerance = NUMBER_RTOL if rtol is None else rtol
+            if abs(u - v) > max(unit * (1 + 1e-9), tolerance * abs(u)):
                 return False
     return True
 
