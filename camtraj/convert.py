@@ -629,7 +629,8 @@ def step_warning(robot: Robot, path: PathSolution, targets: Array, frames: NDArr
     return (f"{count} frame(s) jump: {JOINT_NAMES[j]} moves {size} between frames "
             f"{int(frames[k])} and {int(frames[k + 1])}, {float(steps[k, j]):.1f}x what it can "
             f"move in one frame ({what}); the take is slowed to cover it (--timing optimal "
-            f"slows only the frames around it)")
+            f"slows only the frames around it; camtraj place looks for a track placement "
+            f"that needs no jump)")
 
 
 def summary(

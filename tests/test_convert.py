@@ -661,6 +661,7 @@ def test_an_arm_reconfiguring_between_two_frames_is_named_and_a_fast_move_is_not
         found = re.search(r"the arm reconfigures: half-way the camera is ([0-9.]+) m off", warning)
         assert found is not None and float(found.group(1)) >= 0.02, warning
         assert "--timing optimal slows only the frames around it" in warning
+        assert "camtraj place looks for a track placement that needs no jump" in warning
     whip = read_shot(SHOTS / "whip_pan.usda")
     whip_dt = 1.0 / whip.fps
     fast = solve_path_report(robot, whip.cam2world @ np.linalg.inv(robot.camera2flange),
