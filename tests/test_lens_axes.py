@@ -189,6 +189,14 @@ def test_metadata_and_summary_name_the_lens_axes(dolly: dict[str, Any]) -> None:
     assert info.returncode == 0, info.stderr
     assert re.search(r"^  zoom\s+\d+%", info.stdout, re.M)
     assert "lens Cine zoom 24-290 mm T2.8" in info.stdout
+    # the lens file's [controller.zoom] (65536 counts a turn): the counts the take commands,
+    # from the zoom motor's column of /joint_states as mcap_ros2 decodes it
+    zoom = dolly["decoded"]["q"][:, dolly["decoded"]["names"].index("zoom")]
+    counts = json.loads(md["camtraj"]["controller"])
+    assert list(counts) == ["zoom"]
+    assert counts["zoom"]["counts_range"] == pytest.approx(
+        [10430.378 * zoom.min(), 10430.378 * zoom.max()], rel=1e-12)
+    assert re.search(r"^  zoom     0 \+ 10430.4 x q   \[-?\d+, \d+\]$", info.stdout, re.M)
 
 
 def test_the_lens_motors_have_position_margins_like_the_joints(
