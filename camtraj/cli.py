@@ -32,7 +32,13 @@ from camtraj.errors import (
     UnreachableFramesError,
     one_line,
 )
-from camtraj.options import ConvertOptions, build_options, convert_options, more_convert_options
+from camtraj.options import (
+    ConvertOptions,
+    build_options,
+    convert_options,
+    more_convert_options,
+    option_values,
+)
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 from camtraj.shown import (
@@ -494,21 +500,20 @@ def _unreachable_report(shot: str, exc: UnreachableFramesError,
     }
 
 
+PLACE_FLAGS = ("--camera", "--robot", "--set-file", "--frames", "--timing", "--clearance",
+               "--lens")
+"""The convert options ``camtraj place`` takes too (the unreachable note carries them)."""
+
+
 def _place_command(shot: str, options: ConvertOptions | None) -> str:
     """The ``camtraj place`` command line that searches a placement for the shot as it was
-    checked: the same robot, set file (its floor, region, yaw range and obstacles), camera,
-    frames, lens, clearance and timing."""
+    checked: its convert options that place takes (the set file's floor, region, yaw range
+    and obstacles bind place too), ``--timing shot`` left out as place's default."""
+    pairs = option_values(options) if options is not None else []
     words = ["camtraj", "place", shot]
-    if options is not None:
-        for flag, value in (("--robot", options.robot), ("--set-file", options.set_file),
-                            ("--camera", options.camera), ("--lens", options.lens),
-                            ("--clearance", options.clearance)):
-            if value is not None:
-                words += [flag, str(value)]
-        if options.frames is not None:
-            words += ["--frames", f"{options.frames[0]}:{options.frames[1]}"]
-        if options.timing != "shot":
-            words += ["--timing", options.timing]
+    for flag, value in pairs:
+        if flag in PLACE_FLAGS and (flag, value) != ("--timing", "shot"):
+            words += [flag, value]
     return shlex.join(words)
 
 

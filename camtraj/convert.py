@@ -39,6 +39,7 @@ from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
 from camtraj.shown import frame_runs, frame_span
 from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
+from camtraj.timing.path import runs
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
@@ -211,7 +212,7 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
         for a, b in parts:
             kept[a:b + 1] = True
         if parts:
-            left = [(int(frames[a]), int(frames[b])) for a, b in _runs(~kept)]
+            left = [(int(frames[a]), int(frames[b - 1])) for a, b in runs(~kept)]
             said = (f"frame {left[0][0]}" if len(left) == 1 and left[0][0] == left[0][1]
                     else frame_runs(left))
             out.append("to split the shot there, convert each part on its own: "
@@ -219,12 +220,6 @@ def camera_cuts(targets: Array, frames: NDArray[np.int_], around: int = 3) -> li
                                    for a, b in parts)
                        + (f" (leaving out {said})" if left else ""))
     return out
-
-
-def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
-    """The runs (first, last) of True in ``mask``, as indices."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
-    return list(zip(edges[::2].tolist(), (edges[1::2] - 1).tolist(), strict=True))
 
 
 def _jump(size: float, unit: str) -> str:

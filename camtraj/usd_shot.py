@@ -582,10 +582,7 @@ def _composition_errors(prim: Any, *, parents: bool = True) -> list[str]:
             node = nodes.pop()
             errors += node.layerStack.localErrors
             nodes += node.children
-        for error in errors:
-            text = _one_line_error(error)
-            if text not in found:
-                found.append(text)
+        found += [text for text in _one_line_errors(errors) if text not in found]
         if not parents:
             break
         here = here.GetParent()
@@ -612,16 +609,13 @@ def _why_no_camera(stage: Any, camera: str | None) -> str | None:
 
 def _stage_composition_errors(stage: Any) -> list[str]:
     """Every composition error of the stage, one line each (:func:`_composition_errors`)."""
-    found: list[str] = []
-    for error in stage.GetCompositionErrors():
-        text = _one_line_error(error)
-        if text not in found:
-            found.append(text)
-    return found
+    return _one_line_errors(stage.GetCompositionErrors())
 
 
-def _one_line_error(error: Any) -> str:
-    return " ".join(str(error).split()).removesuffix("; skipping.")
+def _one_line_errors(errors: Any) -> list[str]:
+    """USD's composition errors as distinct one-line messages, in order."""
+    texts = [" ".join(str(e).split()).removesuffix("; skipping.") for e in errors]
+    return list(dict.fromkeys(texts))
 
 
 def _camera_paths(stage: Any) -> list[str]:

@@ -53,6 +53,10 @@ _FENCE = re.compile(r"^(?:<!-- round-off: (\d+(?:\.\d+)?)% -->\n)?```console\n(.
 PROMPT = "$ "
 
 
+NUMBER_RTOL = 0.01
+"""How far a printed number may move with the machine's round-off (:func:`agrees`)."""
+
+
 class ExampleError(Exception):
     """A console block that cannot be run as an example (it names the file and line)."""
 
@@ -65,7 +69,7 @@ class Block:
     start: int  # offset of the block's first line in the document
     end: int
     text: str
-    rtol: float = 0.01  # how far a measured number may move (:func:`agrees`)
+    rtol: float = NUMBER_RTOL  # how far a measured number may move (:func:`agrees`)
 
     @property
     def line(self) -> int:
@@ -118,14 +122,11 @@ def run_block(block: Block, work: Path) -> str:
     return "".join(out).replace(str(work) + os.sep, "")
 
 
-NUMBER_RTOL = 0.01
-"""How far a printed number may move with the machine's round-off (:func:`agrees`)."""
-
 _NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
 _UNIT_AFTER = re.compile(r" ?(?:%|x\b|m\b|mm\b|deg|s\b|ms\b|µ)")  # not fps, Hz: settings
 
 
-def agrees(expected: str, got: str, rtol: float | None = None) -> bool:
+def agrees(expected: str, got: str, rtol: float = NUMBER_RTOL) -> bool:
     """Whether a transcript is the expected one up to round-off: the same lines and words,
     each measured number within one unit of its last printed digit or :data:`NUMBER_RTOL` of
     it, every bare whole number the same."""
@@ -150,8 +151,7 @@ def agrees(expected: str, got: str, rtol: float | None = None) -> bool:
                 continue
             unit = 10.0 ** -max(len(x.group(1) or ""), len(y.group(1) or ""))
             u, v = float(x.group(0)), float(y.group(0))
-            tolerance = NUMBER_RTOL if rtol is None else rtol
-            if abs(u - v) > max(unit * (1 + 1e-9), tolerance * abs(u)):
+            if abs(u - v) > max(unit * (1 + 1e-9), rtol * abs(u)):
                 return False
     return True
 
