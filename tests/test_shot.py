@@ -42,8 +42,8 @@ def solved(robot: Robot, tmp_path_factory: pytest.TempPathFactory) -> list[dict[
         rep = solve_path_report(robot, shot.targets, frame_interval=1.0 / shot.fps)
         paper = solve_path(robot, shot.targets, objective="paper")
         out.append({"shot": shot, "rep": rep, "paper": paper,
-                    "speed": max_speed(robot, rep.q, shot.fps),
-                    "paper_speed": max_speed(robot, paper, shot.fps)})
+                    "speed": max_speed(robot, rep.q, shot.fps, shot.targets),
+                    "paper_speed": max_speed(robot, paper, shot.fps, shot.targets)})
     return out
 
 
@@ -460,3 +460,29 @@ def test_room_need_is_the_slow_down_whose_stop_ends_on_the_limit(robot: Robot) -
                 num = (cost.take_use(up).ends[0][e, axis]
                        - cost.take_use(down).ends[0][e, axis]) / (2 * h)
                 assert lin[e, col, axis] == pytest.approx(num, rel=1e-5, abs=1e-6), (e, axis, f)
+
+
+def test_the_camera_is_at_rest_where_it_eases_from_or_to_rest() -> None:
+    """An eased start or stop is at rest (the spline's velocity through the poses there is
+    below 1 mm/s and 0.1 deg/s); an end in motion, a pan alone in motion, and a creep of 5 mm/s
+    are not."""
+    from camtraj.ik.shot import camera_rests
+
+    def shot(x: np.ndarray, pan_deg: np.ndarray) -> np.ndarray:
+        T = np.tile(np.eye(4), (x.size, 1, 1))
+        a = np.radians(pan_deg)
+        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
+        T[:, :3, 3] = np.stack([x, np.full(x.size, 1.0), np.full(x.size, 1.4)], axis=1)
+        return T
+
+    dt = 1.0 / 24.0
+    u = np.linspace(0.0, 1.0, 96)
+    ease = 3 * u ** 2 - 2 * u ** 3  # from rest to rest
+    still = np.zeros(96)
+    assert camera_rests(shot(2.0 * ease, 30 * ease), dt) == (True, True)
+    assert camera_rests(shot(2.0 * u ** 2, still), dt) == (True, False)  # accelerating out
+    assert camera_rests(shot(2.0 * (1 - (1 - u) ** 2), still), dt) == (False, True)
+    assert camera_rests(shot(np.full(96, 2.0), 40 * u), dt) == (False, False)  # a pan
+    creep = 0.005 * dt * np.arange(96)  # 5 mm/s
+    assert camera_rests(shot(creep, still), dt) == (False, False)
+    assert camera_rests(shot(creep / 10, still), dt) == (True, True)  # 0.5 mm/s

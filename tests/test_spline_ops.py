@@ -20,10 +20,11 @@ from camtraj.timing import Limits
 from camtraj.timing.path import FramePath
 
 
-def smooth_path(robot: Robot, n: int, seed: int) -> np.ndarray:
-    """A path of n frames well inside the limits, every axis moving (no holds)."""
+def smooth_path(robot: Robot, n: int, seed: int, u: np.ndarray | None = None) -> np.ndarray:
+    """A path of n frames well inside the limits, every axis moving (no holds); ``u`` (n,):
+    where on the path (0 to 1) each frame is (default evenly spread)."""
     rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 1.0, n)[:, None]
+    t = (np.linspace(0.0, 1.0, n) if u is None else u)[:, None]
     mid = 0.5 * (robot.lower + robot.upper)
     half = 0.5 * (robot.upper - robot.lower)
     waves = sum(rng.uniform(-0.1, 0.1, 8) * np.sin(2 * np.pi * f * t + rng.uniform(0, 6, 8))
@@ -185,3 +186,52 @@ def test_whole_powers_equal_pow() -> None:
                [0.0, 1.0, 2.0, 5.0, 8.0 / 3.0, 2.5]):
         e = np.array(ex)
         assert np.allclose(powers(a, e), a ** e, rtol=1e-13, atol=0.0)
+
+
+@pytest.mark.parametrize(("n", "rests", "held_pairs"), [
+    (40, (True, False), []),
+    (150, (False, True), []),
+    (400, (True, True), []),
+    (200, (True, True), [(90, 100)]),  # at rest at both ends, a hold between
+    (120, (True, False), [(100, 119)]),  # at rest at the start, holding to the end
+])
+def test_operators_with_ends_at_rest_give_the_timing_stages_spline(
+        robot: Robot, n: int, rests: tuple[bool, bool],
+        held_pairs: list[tuple[int, int]]) -> None:
+    """Where the camera is at rest on the first or last frame (``--edges still``), the timing
+    stage fits the spline with zero velocity there: the operators give that spline too, and
+    its velocity at such an end is zero. The path eases from and to rest at those ends, as
+    the camera does there (a path that runs into a rest end at speed makes a transient wider
+    than the band)."""
+    k = np.arange(n) / (n - 1)
+    ease = {(True, False): 1 - np.cos(0.5 * np.pi * k), (False, True): np.sin(0.5 * np.pi * k),
+            (True, True): 0.5 - 0.5 * np.cos(np.pi * k)}[rests]
+    q = smooth_path(robot, n, n + 7, ease)
+    held = np.zeros(n - 1, dtype=bool)
+    for a, b in held_pairs:
+        held[a:b] = True
+        q[a + 1:b + 1] = q[a]
+    limits = Limits.from_robot(robot)
+    rest = np.repeat(np.array(rests)[:, None], 8, axis=1)
+    path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, held, rest)
+    free = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, held)
+    for end, at_rest in zip((0.0, n - 1.0), rests, strict=True):
+        v_rest = path.at(np.array([end]), 1)[1]
+        v_free = free.at(np.array([end]), 1)[1]
+        if at_rest:
+            assert np.abs(v_rest).max() <= 1e-12
+            assert np.abs(v_free).max() > 0.0  # the smooth path itself moves there
+    knots = np.arange(n, dtype=float)
+    mids = np.arange(n - 1) + 0.5
+    runs = hold_runs(held)
+    ops = spline_ops(n, runs, rests)
+    values = ops.apply(q)
+    for i, (order, rows) in enumerate(zip(ops.orders, ops.rows, strict=True)):
+        x = knots if rows == n else mids
+        if rows == n:  # a hold's first frame: just before it, on the stretch's last piece
+            first = np.array([a for a, _ in runs if a > 0], dtype=int)
+            x[first] -= 1e-9
+        want = path.at(x, 3)[order]
+        got = values[:rows, :, i]
+        scale = np.abs(want).max(axis=0)
+        assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (order, n, rests)

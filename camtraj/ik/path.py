@@ -14,7 +14,14 @@ from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
 from camtraj.ik.refine import REFINE_STAGES, Refinement
-from camtraj.ik.shot import Candidates, camera_holds, candidates, choose_ranked, measures
+from camtraj.ik.shot import (
+    Candidates,
+    camera_holds,
+    camera_rests,
+    candidates,
+    choose_ranked,
+    measures,
+)
 from camtraj.ik.shot_cost import ShotCost
 from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.ik.spline_ops import hold_runs
@@ -88,6 +95,9 @@ class PathSolution:
         objective: ``"shot"`` or ``"paper"``.
         move_to_start: The move from the start to the first frame.
         margins: The smallest distances to limits and singularities over the shot.
+        rest: Whether the path stands still on its first / last frame (``still_ends`` asked
+            and the camera at rest there, :func:`~camtraj.ik.shot.camera_rests`): whatever
+            times it gives those ends zero velocity (:meth:`rest_axes`).
     """
 
     q: Array
@@ -96,6 +106,17 @@ class PathSolution:
     objective: str
     move_to_start: MoveToStart
     margins: PathMargins
+    rest: tuple[bool, bool] = (False, False)
+
+    def rest_axes(self, axes: int = 8) -> NDArray[np.bool_] | None:
+        """``time_shot``'s ``rest`` for this path and ``axes - 8`` lens axes after its
+        joints (2, axes): the joints at rest where :attr:`rest` says, the lens motors free (a
+        focus pull may start while the camera stands still); None where nothing rests."""
+        if not any(self.rest):
+            return None
+        out = np.zeros((2, axes), dtype=bool)
+        out[:, :8] = np.array(self.rest)[:, None]
+        return out
 
 
 def solve_path(
@@ -107,11 +128,12 @@ def solve_path(
     frame_interval: float | None = None,
     frame_numbers: ArrayLike | None = None,
     progress: Callable[[int], None] | None = None,
+    still_ends: bool = False,
 ) -> Array:
     """The joint path (n, 8) of :func:`solve_path_report`."""
     return solve_path_report(robot, targets, start, objective=objective,
                              frame_interval=frame_interval, frame_numbers=frame_numbers,
-                             progress=progress).q
+                             progress=progress, still_ends=still_ends).q
 
 
 def solve_path_report(
@@ -123,6 +145,7 @@ def solve_path_report(
     frame_interval: float | None = None,
     frame_numbers: ArrayLike | None = None,
     progress: Callable[[int], None] | None = None,
+    still_ends: bool = False,
 ) -> PathSolution:
     """Solve a whole shot.
 
@@ -137,6 +160,12 @@ def solve_path_report(
             1/24 s); with it, ``within_step`` flags steps beyond the velocity limits.
         frame_numbers: Film frame numbers (n,) used in error messages; default 0..n-1.
         progress: Called with the number of frames just finished (for a progress bar).
+        still_ends: Where the camera is at rest on the first or last frame (an eased start
+            or stop, :func:`~camtraj.ik.shot.camera_rests`), the robot stands still there
+            too: the path is timed with zero velocity on that frame (:attr:`PathSolution.rest`)
+            and the shot objective solves for that timing. Default: free ends, where the
+            redundant axes may already move on a frame the camera holds still (the faster
+            take; its run-up moves the camera before the first frame).
 
     Raises:
         ValueError: A malformed argument (named in the message).
@@ -160,6 +189,8 @@ def solve_path_report(
         msg = f"frame_interval must be a positive number of seconds (at most 60), got " \
               f"{frame_interval!r}"
         raise ValueError(msg)
+    dt = frame_interval or 1.0 / 24.0
+    rest = camera_rests(Ts, dt) if still_ends else (False, False)
     if obj == "shot":
         # scipy's own OpenBLAS (the refinement's banded solve) must be loaded before the limit
         # is set, or the limit does not reach it: two spinning BLAS threads per tiny solve
@@ -167,7 +198,7 @@ def solve_path_report(
         import scipy.linalg  # noqa: F401
 
         with threadpool_limits(limits=1, user_api="blas"):
-            q = solve_shot(robot, Ts, first, frame_interval or 1.0 / 24.0, frames, progress)
+            q = solve_shot(robot, Ts, first, dt, frames, progress, rest)
     else:
         q = _solve_sequence(robot, Ts, first, frames, progress)
     prev = np.vstack([first, q[:-1]])
@@ -177,7 +208,7 @@ def solve_path_report(
         bound = robot.max_velocity * frame_interval * (1.0 + 1e-9) + 1e-12
         steps[1:] = np.all(np.abs(np.diff(q, axis=0)) <= bound, axis=1)
     return PathSolution(q, cost, steps, obj, move_to_start(robot, first, q[0]),
-                        path_margins(robot, q))
+                        path_margins(robot, q), rest)
 
 
 def _check_targets(targets: ArrayLike) -> Array:
@@ -224,8 +255,10 @@ def _solve_sequence(robot: Robot, Ts: Array, first: Array, frames: NDArray[np.in
 
 def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
                frames: NDArray[np.int_],
-               progress: Callable[[int], None] | None = None) -> Array:
-    """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`).
+               progress: Callable[[int], None] | None = None,
+               rest: tuple[bool, bool] = (False, False)) -> Array:
+    """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`), timed with zero
+    velocity on the first / last frame where ``rest`` says.
 
     The dynamic programme chooses by frame-to-frame differences, a proxy for the take's
     speed, so the refinement starts from several of its answers: on the robot file's
@@ -249,12 +282,14 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     s = robot.ik
     n = targets.shape[0]
     held = camera_holds(targets)  # where the camera holds, the robot holds (every stage)
-    cost = replace(ShotCost.for_robot(robot, dt), holds=hold_runs(held))
+    cost = replace(ShotCost.for_robot(robot, dt), holds=hold_runs(held), rests=rest)
     limits = Limits.from_robot(robot)
     times = np.arange(n) * dt
+    rest_mask = np.array(rest)[:, None].repeat(8, axis=1) if any(rest) else None
 
     def take_speed(q: Array) -> float:  # to compare answers: a thousandth is plenty
-        return feasible_speed(q, times, limits, precision=1e-3) if n > 1 else math.inf
+        return (feasible_speed(q, times, limits, rest=rest_mask, precision=1e-3) if n > 1
+                else math.inf)
 
     grids = dict.fromkeys([(s.track_samples, s.extend_samples),
                            (max(1, s.track_samples // 2), s.extend_samples)])

@@ -66,6 +66,41 @@ def camera_holds(targets: Array) -> NDArray[np.bool_]:
     return held
 
 
+REST_SPEED = 1e-3
+"""[m/s] A camera end moving slower than this (and turning slower than :data:`REST_TURN`) is at
+rest: an eased start or stop (the shipped samples, eased from and to rest, read 3e-17 to
+2.5e-4 m/s at their ends; a camera creeping at a millimetre a second moves 40 µm a frame)."""
+REST_TURN = math.radians(0.1)
+"""[rad/s] The turning rate below which a camera end is at rest (with :data:`REST_SPEED`)."""
+
+
+def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
+    """Whether the camera (or flange) is at rest on the first / last frame: the velocity of
+    the timing stage's spline through its poses there (:mod:`camtraj.timing.path`, free
+    ends: an eased move's zero slope is read from its frames) is below :data:`REST_SPEED`
+    and :data:`REST_TURN`. The robot is at rest there too (the path's velocity is zero on
+    that frame: no run-up or run-out swings the camera around a still first or last frame)."""
+    from camtraj.timing.path import end_jerk
+    from camtraj.timing.quintic import solve_knot_derivatives
+
+    n = targets.shape[0]
+    if n < 3:
+        return False, False
+    coords = targets[:, :3, :].reshape(n, 12)  # rows of the pose: rotation and translation
+    free = np.zeros(coords.shape, dtype=bool)
+    zero = np.zeros(coords.shape)
+    v, _ = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
+    out = []
+    for k in (0, n - 1):
+        pose = v[k].reshape(3, 4)  # d pose / d frame
+        turn = targets[k, :3, :3].T @ pose[:, :3]  # skew: the turning rate in camera axes
+        rate = 0.5 * math.hypot(turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
+                                turn[1, 0] - turn[0, 1])
+        speed = float(np.linalg.norm(pose[:, 3]))
+        out.append(speed <= REST_SPEED * dt and rate <= REST_TURN * dt)
+    return out[0], out[1]
+
+
 @dataclass(frozen=True)
 class Candidates:
     """Every frame's candidate configurations, solved in closed form.

@@ -270,6 +270,9 @@ class ShotCost:
         holds: The frames (first, last) where the camera, and so the robot, holds still
             (:func:`~camtraj.ik.spline_ops.hold_runs`): the take's spline is clamped to rest
             next to them, as the timing stage fits it.
+        rests: Whether the camera is at rest on the first / last frame
+            (:func:`~camtraj.ik.shot.camera_rests`): the take's spline has zero velocity
+            there, as the timing stage fits it.
     """
 
     lower: Array
@@ -291,6 +294,7 @@ class ShotCost:
     power: float = 8.0
     scale: float = 1.0
     holds: tuple[tuple[int, int], ...] = ()
+    rests: tuple[bool, bool] = (False, False)
     room: bool = True
     edge_room: bool = False
 
@@ -318,7 +322,7 @@ class ShotCost:
         if n < 3:
             ops = BandOps((1,), (n - 1,), np.tile([[[-1.0], [1.0]]], (n - 1, 1, 1)), 0)
             return TakeUse(ops, ops.apply(q / self.vel), None)
-        ops = spline_ops(n, self.holds)
+        ops = spline_ops(n, self.holds, self.rests)
         lims = np.stack([(self.vel, self.acc, self.jerk)[k - 1] for k in ops.orders], axis=-1)
         z = ops.apply(q) / lims
         vel_z, acc_z = z[[0, -1], :, 0], z[[0, -1], :, 2]  # order 1 and 2 at the knots

@@ -10,6 +10,11 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
   the camera holds). There every axis is a straight line (exactly constant for equal
   solutions) and every moving stretch is its own spline, clamped to the hold's velocity and
   zero acceleration. One axis passing a turning point is no hold: it stays on the spline.
+* **An end at rest stays at rest.** Where the camera is at rest at the first or last frame
+  (an eased start or stop), the caller says so and the spline's velocity there is zero; its
+  acceleration stays free and its jerk is set as at a free end, so a move eased from rest
+  (any polynomial with zero slope at the end, up to a cubic) is reproduced exactly. The
+  robot then stands still on that frame, however its redundant axes move after it.
 * **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
   beyond the frames. The spline's velocity and acceleration there follow from the frames
   themselves; only its jerk is set, to that of a least-squares cubic through the end frames,
@@ -99,12 +104,15 @@ class FramePath:
 
     @classmethod
     def fit(cls, q: Array, dt: float, lower: Array, upper: Array,
-            hold: BoolArray | None = None) -> FramePath:
+            hold: BoolArray | None = None, rest: BoolArray | None = None) -> FramePath:
         """The path through frame solutions ``q`` (n, 8) inside ``[lower, upper]`` (8,).
 
         ``hold`` (n - 1,): the frame pairs where the camera holds still (default: every
         pair). A pair is a hold when it is one and every joint moves by at most
         :data:`HOLD_TOL` (the whole robot still); one axis passing a turning point is not.
+        ``rest`` (2, 8): per axis, whether the first / last frame is at rest (the camera is
+        at rest there, :func:`~camtraj.ik.shot.camera_rests`): the spline's velocity there
+        is zero (default: free ends).
         """
         n, m = q.shape
         diff = np.diff(q, axis=0)
@@ -121,7 +129,7 @@ class FramePath:
         v_given[1:] = np.where(still, diff, 0.0)
         v_given[:-1] = np.where(still, diff, v_given[:-1])
         jerk = end_jerk(q, still)
-        v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+        v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk, rest=rest)
         # Each knot's room: the range, widened to the frame itself where a frame lies beyond
         # it (by round-off, or a violation the limit checks report): never further out.
         lo, hi = np.minimum(lower, q), np.maximum(upper, q)
@@ -135,7 +143,7 @@ class FramePath:
             clamped |= out
             v_given = np.where(out, v_in, v_given)
             w_given = np.where(out, w_in, w_given)
-            v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+            v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk, rest=rest)
         # Still out after the refits: pull knots in without refitting until no piece leaves
         # its range. A piece whose two knots are both pulled in is inside (convex hull), so
         # this ends after at most n passes.

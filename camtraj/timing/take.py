@@ -182,6 +182,7 @@ def time_shot(
     frame_numbers: ArrayLike | None = None,
     start: ArrayLike | None = None,
     hold: ArrayLike | None = None,
+    rest: ArrayLike | None = None,
     edges: str = "gentle",
 ) -> Take:
     """Time a joint path for the robot: from rest, through every film frame, to rest.
@@ -227,12 +228,13 @@ def time_shot(
     n = q.shape[0]
     fps = 1.0 / dt
     hold_mask = _validate_hold(hold, n)
+    rest_mask = _validate_rest(rest, limits.size)
     if edges not in EDGE_MODES:
         msg = f"edges {edges!r} is not one of {', '.join(EDGE_MODES)}"
         raise ValueError(msg)
     start_q = None if start is None else _validate_start(start, limits.size)
     # the real-time grid is kept only where it is the take's stream
-    real, grid = _RealTime.of(q, dt, limits, rate, hold_mask, edges, start_q, frames,
+    real, grid = _RealTime.of(q, dt, limits, rate, hold_mask, rest_mask, edges, start_q, frames,
                               keep=mode == "shot")
     # the ends asked for are built wherever they fit the speed the take runs at, else those
     # the maximum feasible speed needs (the full limits)
@@ -409,11 +411,11 @@ class _RealTime:
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
-           edges: str, start: Array | None, frames: IntArray,
+           rest: BoolArray | None, edges: str, start: Array | None, frames: IntArray,
            precision: float = FACTOR_RTOL, *,
            keep: bool = False) -> tuple[_RealTime, _Grid | None]:
         """The check, and with ``keep`` its servo grid (else dropped here)."""
-        path = FramePath.fit(q, dt, limits.lower, limits.upper, hold)
+        path = FramePath.fit(q, dt, limits.lower, limits.upper, hold, rest)
         ticks = max(1, round(rate * dt))
         grid = _Grid.of(path, ticks, 1.0 / dt)
         fit = _EdgeFit.of(path, grid.stream, limits, edges, start, frames)
@@ -459,7 +461,8 @@ def ends_to_use(gentle_need: float, fast_need: float) -> str:
 
 def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, *,
                    rate: float = 250.0, hold: ArrayLike | None = None,
-                   edges: str = "gentle", precision: float | None = None) -> float:
+                   rest: ArrayLike | None = None, edges: str = "gentle",
+                   precision: float | None = None) -> float:
     """The maximum feasible speed :func:`time_shot` reports for a joint path (its
     ``TimingReport.max_speed``, the same computation), without timing a take: 0 where a
     position limit is crossed at the shot's own timing (no speed fixes that) or no slower
@@ -469,8 +472,9 @@ def feasible_speed(q_frames: ArrayLike, frame_times: ArrayLike, limits: Limits, 
     :data:`FACTOR_RTOL`, what ``time_shot`` uses); a coarser one costs less and never reports
     a faster speed than the exact one."""
     q, dt, frames = _validate(q_frames, frame_times, None, "shot", rate, limits)
-    rt, _ = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]), edges, None,
-                         frames, FACTOR_RTOL if precision is None else precision)
+    rt, _ = _RealTime.of(q, dt, limits, rate, _validate_hold(hold, q.shape[0]),
+                         _validate_rest(rest, limits.size), edges, None, frames,
+                         FACTOR_RTOL if precision is None else precision)
     if any(v.quantity == "position" for v in rt.limiting):
         return 0.0
     return rt.max_speed
@@ -562,6 +566,16 @@ def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
     mask = np.asarray(hold)
     if mask.shape != (n - 1,) or mask.dtype != np.bool_:
         msg = f"hold must be {n - 1} booleans (one per frame pair), got {mask.shape} {mask.dtype}"
+        raise ValueError(msg)
+    return mask
+
+
+def _validate_rest(rest: ArrayLike | None, axes: int) -> BoolArray | None:
+    if rest is None:
+        return None
+    mask = np.asarray(rest)
+    if mask.shape != (2, axes) or mask.dtype != np.bool_:
+        msg = f"rest must be 2 x {axes} booleans (per end and axis), got {mask.shape} {mask.dtype}"
         raise ValueError(msg)
     return mask
 
