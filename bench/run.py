@@ -836,10 +836,12 @@ def bench_speeds(robot: Robot, rev: str, work: Path, quick: bool) -> dict[str, A
         log(f"table 5: {s.name}")
         sp = speeds(robot, s, EFFORT)
         q_base = base.get(s.name)
+        base_speed = (max_speed(robot, q_base, s.fps, s.targets) if q_base is not None
+                      else math.nan)
         rows.append({"shot": s.name, "set": which,
                      "frames": int(s.targets.shape[0]), "fps": s.fps,
                      "default": sp.default, "paper": sp.paper, "effort": sp.effort,
-                     "base": max_speed(robot, q_base, s.fps) if q_base is not None else math.nan})
+                     "base": base_speed})
     return {"rows": rows, "base_rev": rev, "base_note": note, "effort": EFFORT, "quick": quick}
 
 

@@ -42,6 +42,7 @@ from camtraj.options import (
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 from camtraj.shown import (
+    distance,
     edge_use,
     frame_rate,
     frame_span,
@@ -659,7 +660,9 @@ def _report(r: dict[str, Any]) -> str:
     # ruckig moves plus the holds that put the frames on servo ticks), as the report shows
     lines.append(f"  run-up {seconds(r['shot_start'])} s, run-out "
                  f"{seconds(r['duration'] - r['shot_end'])} s ({r.get('edges', 'gentle')}; "
-                 "ends column: their peak use of the limits)")
+                 "ends column: their peak use of the limits); the camera moves "
+                 f"{distance(r['runup']['camera_travel_m'])} before the first frame, "
+                 f"{distance(r['runout']['camera_travel_m'])} after the last")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

@@ -277,6 +277,7 @@ def analyse(
         analysis.path = solve_path_report(
             robot, flange2base, start, objective=options.objective,
             frame_interval=1.0 / shot.fps, frame_numbers=shot.frames, progress=progress.advance,
+            still_ends=options.edges == "still",
         )
     progress.stage("time")
     with _stage(timings, "timing"):
@@ -290,7 +291,8 @@ def analyse(
             analysis.take = time_shot(
                 q_frames, shot.times, limits, mode=options.timing,
                 rate=options.rate, frame_numbers=shot.frames, start=start,
-                hold=camera_holds(targets), edges=options.edges,
+                hold=camera_holds(targets), rest=analysis.path.rest_axes(q_frames.shape[1]),
+                edges=options.timing_edges,
             )
         except TimingLimitError as exc:
             # a jump between frames (a cut in the shot, or a flip) smears over the frames
@@ -640,9 +642,13 @@ def summary(
     rep = take.report
     warnings = run_warnings(analysis)
 
-    def extents(part: dict[str, Any]) -> dict[str, Any]:
+    travel = camera_travel(analysis)
+
+    def extents(part: dict[str, Any], side: int) -> dict[str, Any]:
         return {
             "duration_s": part.get("duration", 0.0),
+            # how far the camera moves from the first (last) frame's position before (after)
+            "camera_travel_m": travel[side],
             "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.
             "peak_use": part.get("peak_use", {}),
@@ -659,7 +665,9 @@ def summary(
         "robot": analysis.robot.name,
         "placement": analysis.placement.describe(),
         "timing": take.mode,
-        "edges": take.report.runup.get("edges", options.edges),  # as built: gentle where it fits
+        # as built: gentle where it fits; still where the robot rests on an end frame
+        "edges": ("still" if any(path.rest) and rep.runup.get("edges") == "gentle"
+                  else rep.runup.get("edges", options.edges)),
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": round(float(take.rate), 9),  # 250.0, not 249.99999999999977
         # an optimal retime cuts each frame interval into its own equal steps: they vary
@@ -670,16 +678,31 @@ def summary(
         "max_speed": float(rep.max_speed),
         "feasible_fps": float(rep.feasible_fps),
         "peak_use": rep.peak_use,
-        "runup": extents(rep.runup),
+        "runup": extents(rep.runup, 0),
         "move_to_start": _move_to_start(path),
         "margins": margins_summary(analysis),
-        "runout": extents(rep.runout),
+        "runout": extents(rep.runout, 1),
         "warnings": warnings,
         "collision": analysis.collision,
         **({} if analysis.robot.lens is None else {"lens": analysis.robot.lens.describe()}),
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }
+
+
+def camera_travel(analysis: Analysis) -> tuple[float, float]:
+    """How far [m] the camera moves from its first frame's position during the run-up, and
+    from its last frame's during the run-out (a robot whose redundant axes still move on a
+    frame where the camera is at rest swings the camera around it: ``--edges still``)."""
+    take, robot = analysis.take, analysis.robot
+    assert take is not None
+    out = []
+    for part, frame in ((slice(0, int(take.frame_samples[0]) + 1), int(take.frame_samples[0])),
+                        (slice(int(take.frame_samples[-1]), None), int(take.frame_samples[-1]))):
+        at = robot.camera_pose(take.q[part, :8])[:, :3, 3]
+        here = robot.camera_pose(take.q[frame, :8])[:3, 3]
+        out.append(float(np.linalg.norm(at - here, axis=1).max()))
+    return out[0], out[1]
 
 
 def _move_to_start(path: PathSolution) -> dict[str, Any]:

@@ -133,7 +133,7 @@ _OPENJD_PARAMS = {
     "--objective": ("Objective", "IK objective."),
     "--focal-length-unit": ("FocalLengthUnit", "How the shot's focalLength is read."),
     "--clearance": ("Clearance", "Distance [m] kept from the set file's obstacles."),
-    "--edges": ("Edges", "Run-up and run-out: gentle or fast."),
+    "--edges": ("Edges", "Run-up and run-out: gentle, fast or still."),
     "--lens": ("Lens", "Lens file: zoom, focus and iris motors."),
 }
 """Job parameter name and description of each optional convert flag."""

@@ -19,7 +19,7 @@ import click
 from camtraj.errors import InputError
 
 TIMING_MODES = ("shot", "scale", "optimal")
-EDGE_MODES = ("gentle", "fast")
+EDGE_MODES = ("gentle", "fast", "still")
 OBJECTIVES = ("shot", "paper")
 FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
@@ -48,7 +48,11 @@ class ConvertOptions:
             the set file's ``[collision] clearance_m``.
         edges: How the run-up and run-out move: ``"gentle"`` (per axis no more of the
             acceleration and jerk limits than the shot uses, at least a quarter of them) or
-            ``"fast"`` (the full limits: the shortest, time-optimal run-up and run-out).
+            ``"fast"`` (the full limits: the shortest, time-optimal run-up and run-out) or
+            ``"still"`` (gentle, and where the camera is at rest on the first or last frame,
+            an eased start or stop, the robot stands still there too: the solver keeps its
+            redundant axes from moving on that frame, so no run-up or run-out moves the
+            camera around it; the take is a few percent slower).
         lens: A lens file (:mod:`camtraj.lens`): its zoom, focus and iris motors are timed
             and written with the joints; default the robot file's ``[lens]``, if any.
     """
@@ -93,6 +97,12 @@ class ConvertOptions:
         if self.edges not in EDGE_MODES:
             msg = f"edges must be one of {', '.join(EDGE_MODES)}, got {self.edges!r}"
             raise InputError(msg)
+
+    @property
+    def timing_edges(self) -> str:
+        """The run-up and run-out the timing stage builds: ``"still"`` ends are gentle ones
+        (what keeps them still is the path's zero velocity where the camera rests)."""
+        return "gentle" if self.edges == "still" else self.edges
 
 
 
@@ -242,7 +252,9 @@ def more_convert_options(func: F) -> F:
             default="gentle",
             show_default=True,
             help="Run-up and run-out: gentle = per axis no more acceleration and jerk than the "
-            "shot uses (at least 25% of the limits); fast = the full limits (shortest).",
+            "shot uses (at least 25% of the limits); fast = the full limits (shortest); "
+            "still = gentle, and where the camera is at rest on the first or last frame the "
+            "robot stands still there too (no run-up moves the camera; a few percent slower).",
         ),
         click.option(
             "--lens",

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
-from camtraj.ik import PathSolution, solve_path_report
+from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.inputs import one_line
 from camtraj.options import TIMING_MODES
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
@@ -58,11 +58,12 @@ YAW_STEP_DEG = 15.0
 _SPEED_CAP = 100.0
 
 
-def _solve(robot: Robot, flange2base: Array, start: Array | None, objective: str | None,
-           frame_interval: float, frame_numbers: NDArray[np.int64]) -> PathSolution:
+def _solve(robot: Robot, flange2base: Array, problem: Problem, frame_interval: float,
+           frame_numbers: NDArray[np.int64]) -> PathSolution:
     """The whole-shot solver, in one place (re-point it here when the solver changes)."""
-    return solve_path_report(robot, flange2base, start, objective=objective,
-                             frame_interval=frame_interval, frame_numbers=frame_numbers)
+    return solve_path_report(robot, flange2base, problem.start, objective=problem.objective,
+                             frame_interval=frame_interval, frame_numbers=frame_numbers,
+                             still_ends=problem.still_ends)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -88,6 +89,7 @@ class Problem:
     name: str = ""  # the shot, for messages
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
     lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
+    still_ends: bool = False  # --edges still: the robot still where the camera rests at an end
 
 
 @dataclass(frozen=True)
@@ -203,8 +205,7 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     times = problem.times[idx]
     full = stride == 1
     try:
-        path = _solve(robot, flange2base, problem.start, problem.objective,
-                      float(times[1] - times[0]), frames)
+        path = _solve(robot, flange2base, problem, float(times[1] - times[0]), frames)
     except UnreachableFramesError as exc:
         return Result(x, y, yaw_deg, full, 1.0 - len(exc.errors) / len(idx), False, False, 0.0,
                       "", {}, str(exc))
@@ -218,7 +219,8 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     try:
         take = time_shot(q_time, times, limits, mode="scale",
                          rate=problem.rate if full else min(problem.rate, 100.0),
-                         frame_numbers=frames)
+                         frame_numbers=frames, hold=camera_holds(flange2base),
+                         rest=path.rest_axes(q_time.shape[1]))
     except TimingLimitError as exc:
         speed = exc.max_speed if math.isfinite(exc.max_speed) else 0.0
         return Result(x, y, yaw_deg, full, 1.0, True, False, speed, "position", marg, str(exc))
@@ -693,7 +695,8 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
                       np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
                       obstacles=tuple(obstacles),
                       clearance=sf.clearance_m if clearance is None else clearance,
-                      name=one_line(shot_path), timing=timing, lens_q=lens_q)
+                      name=one_line(shot_path), timing=timing, lens_q=lens_q,
+                      still_ends=options.edges == "still")
     return problem, shot
 
 

@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "edge_use", "frame_rate", "frame_runs",
+__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "distance", "edge_use", "frame_rate", "frame_runs",
            "frame_span", "percent",
            "scale_fit", "seconds", "servo", "speed_percent"]
 
@@ -48,6 +48,13 @@ def seconds(x: float, digits: int = 2) -> str:
         return "-"
     exact = Decimal(f"{x:.6f}").quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP)
     return f"{exact:.{digits}f}"
+
+
+def distance(metres: float) -> str:
+    """A distance a crew reads at a glance: millimetres below 1 cm, centimetres to 1 m."""
+    if metres < 0.01:
+        return f"{metres * 1e3:.1f} mm"
+    return f"{metres * 100:.1f} cm" if metres < 1.0 else f"{metres:.2f} m"
 
 
 def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:

@@ -730,19 +730,22 @@ def with_effort(robot: Robot, k: float) -> Robot:
     ))
 
 
-def max_speed(robot: Robot, q: Array, fps: float) -> float:
+def max_speed(robot: Robot, q: Array, fps: float, targets: Array) -> float:
     """The timing stage's maximum feasible speed of the joint path ``q`` (n, 8) at ``fps``, as
-    a fraction of real time (``inf``: nothing moves).
+    a fraction of real time (``inf``: nothing moves), timed as ``convert`` times it: still
+    where the camera ``targets`` (n, 4, 4) hold.
 
     A path whose spline leaves a position limit between frames still gets the speed its
     velocities, accelerations and jerks allow (the timing stage reports it with the error); a
     path no speed can make work (the error carries no speed) gets 0.
     """
+    from camtraj.ik import camera_holds
     from camtraj.timing import Limits, TimingLimitError, time_shot
 
     times = np.arange(q.shape[0]) / fps
     try:
-        return float(time_shot(q, times, Limits.from_robot(robot), mode="scale").report.max_speed)
+        return float(time_shot(q, times, Limits.from_robot(robot), mode="scale",
+                               hold=camera_holds(targets)).report.max_speed)
     except TimingLimitError as exc:
         speed = float(exc.max_speed)
         return speed if math.isfinite(speed) else 0.0
@@ -768,5 +771,6 @@ def speeds(robot: Robot, shot: SetShot, k: float = EFFORT) -> Speeds:
     q = solve_path(robot, shot.targets, frame_interval=dt)
     qp = solve_path(robot, shot.targets, objective="paper", frame_interval=dt)
     qk = solve_path(with_effort(robot, k), shot.targets, frame_interval=dt)
-    return Speeds(max_speed(robot, q, shot.fps), max_speed(robot, qp, shot.fps),
-                  max_speed(robot, qk, shot.fps), q, qp, qk)
+    return Speeds(max_speed(robot, q, shot.fps, shot.targets),
+                  max_speed(robot, qp, shot.fps, shot.targets),
+                  max_speed(robot, qk, shot.fps, shot.targets), q, qp, qk)

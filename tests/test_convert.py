@@ -198,6 +198,7 @@ CONVERSIONS: dict[str, tuple[str, tuple[str, ...]]] = {
     "maya_again": ("maya_dolly_push_in", ()),
     "whip_shot": ("whip_pan", ("--timing", "shot")),
     "unreachable": ("unreachable", ()),
+    "crane_still": ("blender_crane_up", ("--edges", "still")),
 }
 
 
@@ -223,7 +224,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
 # 1. Round trip: USD -> convert -> MCAP -> FK == the USD camera's world pose
 # --------------------------------------------------------------------------------------------
 
-ROUND_TRIP = (*FEASIBLE, "whip_scale")
+ROUND_TRIP = (*FEASIBLE, "whip_scale", "crane_still")
 
 
 @pytest.mark.parametrize("key", ROUND_TRIP)
@@ -358,6 +359,7 @@ def frame_indices(take: ReadTake) -> NDArray[np.int64]:
 
 
 TIMED = ("whip_scale", "maya_optimal", "whip_optimal", "maya_dolly_push_in", "blender_crane_up",
+         "crane_still",
          "orbit_animated_parent")
 #: Takes on a uniform servo grid (an optimal retime cuts each frame interval its own way).
 UNIFORM = frozenset(TIMED) - {"maya_optimal", "whip_optimal"}
@@ -415,6 +417,44 @@ def test_take_starts_and_ends_at_rest(runs: dict[str, Run], key: str) -> None:
         assert np.abs(take.trajectory_qdd[i]).max() <= 1e-12
     # on the file's nanosecond clock (see test_frames_are_timed_as_the_shot)
     assert take.t[0] <= take.frame_times[0] and take.frame_times[-1] <= take.t[-1] + 0.5e-9
+
+
+def _end_motion(robot: Robot, take: ReadTake) -> tuple[Array, Array]:
+    """From the decoded samples: how far the camera (FK) moves from the first frame's position
+    during the run-up and from the last frame's during the run-out (2,) [m], and each end
+    frame's joint velocity as the central difference of its neighbouring samples (2, 8)."""
+    idx = frame_indices(take)
+    cams = robot.camera_pose(take.q)[:, :3, 3]
+    travel = np.array([np.linalg.norm(cams[:idx[0] + 1] - cams[idx[0]], axis=1).max(),
+                       np.linalg.norm(cams[idx[-1]:] - cams[idx[-1]], axis=1).max()])
+    speed = np.array([(take.q[i + 1] - take.q[i - 1]) / (take.t[i + 1] - take.t[i - 1])
+                      for i in (idx[0], idx[-1])])
+    return travel, speed
+
+
+def test_still_edges_keep_the_robot_still_where_the_camera_rests(
+        runs: dict[str, Run], robot: Robot) -> None:
+    """The crane-up eases from rest and to rest. With free ends the solver already moves the
+    redundant axes on the first frame, and the run-up swings the camera around it; with
+    ``--edges still`` every axis stands still on the first and last frame (the central
+    difference of the samples around them: a thousandth of the velocity limit, where free
+    ends move some axis by a tenth of it), the camera moves under a millimetre before and
+    after (free: over a centimetre before), and the take is at most a tenth slower. The
+    summary's camera travel is what FK of the decoded samples measures."""
+    travel, speed = {}, {}
+    for key in ("blender_crane_up", "crane_still"):
+        travel[key], speed[key] = _end_motion(robot, runs[key].take())
+        data = runs[key].summary_json()
+        got = [data["runup"]["camera_travel_m"], data["runout"]["camera_travel_m"]]
+        np.testing.assert_allclose(got, travel[key], rtol=0, atol=1e-6)
+    use = np.abs(speed["crane_still"]) / robot.max_velocity
+    assert use.max() <= 1e-3, f"still ends move at {use.max():.2g} of a velocity limit"
+    assert (np.abs(speed["blender_crane_up"]) / robot.max_velocity).max() >= 0.1
+    assert travel["crane_still"].max() <= 1e-3
+    assert travel["blender_crane_up"][0] >= 1e-2
+    still, free = runs["crane_still"].summary_json(), runs["blender_crane_up"].summary_json()
+    assert still["edges"] == "still" and free["edges"] == "gentle"
+    assert 0.9 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 
 # --------------------------------------------------------------------------------------------

@@ -194,7 +194,7 @@ def test_the_feasible_frame_rate_does_not_depend_on_the_authored_rate(
         shot = read_shot(write_design(design, tmp_path))
         targets = shot.cam2world @ np.linalg.inv(robot.camera2flange)
         q = solve_path(robot, targets, frame_interval=1.0 / fps)
-        rates[fps] = max_speed(robot, q, fps) * fps
+        rates[fps] = max_speed(robot, q, fps, targets) * fps
     low, high = min(rates.values()), max(rates.values())
     assert low >= 0.7 * high, (
         "feasible frame rate by authored rate: "

@@ -382,6 +382,7 @@ def shot_timing_samples(
         ``(t, q, qd, qdd, qddd, rate)``: times from the first film frame [s], (m,), the four
         quantities (m, 8) and the servo rate [Hz].
     """
+    from camtraj.ik import camera_holds
     from camtraj.timing import Limits, time_shot
 
     robot, shot, path = analysis.robot, analysis.shot, analysis.path
@@ -397,7 +398,8 @@ def shot_timing_samples(
                    velocity=real.velocity * f, acceleration=real.acceleration * f**2,
                    jerk=real.jerk * f**3, names=real.names, kinds=real.kinds)
     take = time_shot(q_frames, shot.times, loose, mode="shot", rate=rate,
-                     frame_numbers=shot.frames)
+                     frame_numbers=shot.frames, hold=camera_holds(analysis.targets),
+                     rest=path.rest_axes(q_frames.shape[1]))
     a, b = int(take.frame_samples[0]), int(take.frame_samples[-1]) + 1
     return (take.t[a:b] - take.t[a], take.q[a:b], take.qd[a:b], take.qdd[a:b],
             take.qddd[a:b], float(take.rate))
