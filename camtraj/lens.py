@@ -316,7 +316,11 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
                    f"{_show(axis.name, cal.low, axis.unit)} to "
                    f"{_show(axis.name, cal.high, axis.unit)}; lens file {lens.source})")
             raise LensRangeError(msg)
-        out[:, i] = cal.position(x)
+        pos = cal.position(x)
+        # a value within RANGE_RTOL beyond an end (a 32-bit float's round-off) maps beyond the
+        # end's position; where that is past a motor limit set on the end, it is the end
+        past = ((x < cal.low) | (x > cal.high)) & ((pos < axis.lower) | (pos > axis.upper))
+        out[:, i] = np.where(past, cal.position(np.clip(x, cal.low, cal.high)), pos)
     return out
 
 

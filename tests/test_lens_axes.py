@@ -368,3 +368,20 @@ def test_read_take_reads_a_take_with_lens_axes(dolly: dict[str, Any]) -> None:
     assert take.q.shape[1] == 11 and take.trajectory_q.shape[1] == 11
     assert take.frame_names == JOINT_NAMES and take.frame_q.shape[1] == 8
     assert np.abs(take.focal_length_mm - dolly["usd"]["focal_mm"]).max() < 1e-9
+
+
+def test_a_motor_limit_on_a_calibration_end_takes_the_shots_float_round_off(
+        dolly: dict[str, Any]) -> None:
+    """USD keeps lens values as 32-bit floats: the dolly zoom's f/2.8 reads 2.7999999. With
+    the iris motor's limit set on the calibration's T2.8 end (min = that row's 0, the natural
+    way to write a lens file) those frames map onto the end, not a hair beyond the limit: the
+    shot converts and the iris motor sits exactly on its limit. Where the limit leaves room
+    (the zoom's min 2 deg below its 24 mm end), the round-off maps as it is: the 24 mm, read
+    back as 23.9999995, a hair below the end's position, so the lens round-trips exactly."""
+    lens = _lens_file(dolly["folder"], "iris_on_limit.toml", "min = -1.0", "min = 0.0")
+    usd = dolly["usd"]
+    assert usd["f_stop"].max() < 2.8 and usd["focal_mm"].min() < 24.0  # the floats' round-off
+    analysis = analyse(dolly["shot"], ConvertOptions(lens=str(lens)))
+    assert analysis.take is not None and analysis.lens_q is not None
+    zoom, _, iris = analysis.lens_q.T
+    assert np.all(iris == 0.0) and -1e-6 < zoom[0] < 0.0
