@@ -626,7 +626,8 @@ def _report(r: dict[str, Any]) -> str:
         f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
         f"speed factor {r['speed_factor']:.3f}, "
         f"{servo(r['servo_rate_hz'], r.get('servo_step_ms'))}",
-        f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}",
+        f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}"
+        + (f", set by {r['max_speed_set_by']}" if r.get("max_speed_set_by") else ""),
         *([f"  placement {placement_text(r['placement'])}"]
           if r["placement"]["source"] != DEFAULT_SOURCE else []),
         "  axis      position velocity  accel   jerk   ends: accel  jerk   run-up   run-out "

@@ -464,6 +464,7 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "servo_rate_hz": repr(round(float(take.rate), 9)),  # 240.0, not 239.99999999999997
         "servo_step_ms": json.dumps(take.servo_steps_ms),
         "max_speed": repr(float(take.report.max_speed)),
+        "max_speed_set_by": take.report.set_by,
         "warnings": json.dumps(run_warnings(analysis)),
         "tool_version": f"camtraj {camtraj.__version__}",
         # What the shot used, for `camtraj info` (fractions of each limit, SI ranges).
@@ -676,6 +677,7 @@ def summary(
         "shot_start": float(take.shot_start),
         "shot_end": float(take.shot_end),
         "max_speed": float(rep.max_speed),
+        "max_speed_set_by": rep.set_by,
         "feasible_fps": float(rep.feasible_fps),
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup, 0),

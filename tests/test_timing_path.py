@@ -322,3 +322,29 @@ def _cubic_derivatives(y: Array) -> list[Array]:
     for _ in range(3):
         out.append(np.polynomial.polynomial.polyder(out[-1]))
     return out
+
+
+def test_what_sets_the_maximum_feasible_speed_is_named(limits: Limits) -> None:
+    """The report names what sets the maximum feasible speed: the run-out where the track
+    ends at nearly full speed (the shot itself uses 97.5% of its velocity limit, so it alone
+    would allow 1.03x: the take's speed is below that), else the axis and quantity whose
+    use needs the slowest take (use^(1/k) for the k-th derivative, from the report's own
+    peak use)."""
+    n = 49
+    t = np.arange(n) / FPS
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] = 3.0 + (1.95 - 1.5 * t[-1]) * t + 0.75 * t**2
+    rep = time_shot(q, t, limits, mode="scale").report
+    assert rep.max_speed < 1.0 / rep.peak_use["track"]["velocity"]
+    assert rep.set_by == "the run-out from frame 48: track's velocity limit", rep.set_by
+    # a sine on two axes, one fast: its acceleration or jerk (whichever needs the slower
+    # take) sets the speed
+    q = np.tile(HOME, (n, 1))
+    q[:, 5] += 0.3 * np.sin(2 * np.pi * t / t[-1]) ** 2
+    q[:, 6] += 0.05 * np.sin(2 * np.pi * t / t[-1]) ** 2
+    rep = time_shot(q, t, limits).report  # at the shot's own timing: its own peak use
+    need = {(axis, k): use[k] ** (1.0 / p) for axis, use in rep.peak_use.items()
+            for k, p in (("velocity", 1), ("acceleration", 2), ("jerk", 3))}
+    axis, quantity = max(need, key=need.__getitem__)
+    assert rep.set_by == f"{axis} {quantity}"
+    assert rep.max_speed == pytest.approx(1.0 / need[(axis, quantity)], rel=1e-6)

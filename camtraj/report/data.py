@@ -84,6 +84,7 @@ class ReportData:
         servo_step_ms: The shortest and longest servo step [ms] (they differ in an optimal
             retime); None when not known (a file written before convert recorded them).
         max_speed: Maximum feasible speed as a fraction of real time (nan: not known).
+        max_speed_set_by: What sets it (``TimingReport.set_by``; "" when not known).
         placement: How the base was placed (text). base2world: The placement, (4, 4).
         joint_names: Axis names (8,). revolute: Whether each axis is revolute, (8,).
         lower, upper, velocity, acceleration, jerk: The robot's limits, (8,) each.
@@ -142,6 +143,7 @@ class ReportData:
     # "runup"/"runout" -> axis -> quantity -> fraction of the limit
     edges: dict[str, dict[str, dict[str, float]]] | None = None
     servo_step_ms: tuple[float, float] | None = None
+    max_speed_set_by: str = ""  # what sets max_speed (TimingReport.set_by); "" unknown
 
     @property
     def has_take(self) -> bool:
@@ -291,6 +293,7 @@ def from_analysis(
             message="" if error is None else str(error), timing=take.mode,
             speed_factor=float(take.speed_factor), servo_rate_hz=float(take.rate),
             servo_step_ms=take.servo_steps_ms, max_speed=float(take.report.max_speed),
+            max_speed_set_by=take.report.set_by,
             samples=samples,
             frame_times=take.frame_times,
             shot_start=float(take.shot_start), shot_end=float(take.shot_end),
@@ -499,7 +502,8 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         robot=md.get("robot", "?"), status="ok", message="", timing=mode,
         speed_factor=_float(md.get("speed_factor")), servo_rate_hz=_float(
             md.get("servo_rate_hz")), fps=_float(md.get("fps")),
-        max_speed=_float(md.get("max_speed")), placement=placement_text(placement),
+        max_speed=_float(md.get("max_speed")), max_speed_set_by=md.get("max_speed_set_by", ""),
+        placement=placement_text(placement),
         base2world=_base2world(placement), joint_names=names, revolute=revolute,
         lower=lim["lower"], upper=lim["upper"], velocity=lim["max_velocity"],
         acceleration=lim["max_acceleration"], jerk=lim["max_jerk"], samples=samples,

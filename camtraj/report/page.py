@@ -87,7 +87,8 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
     if math.isfinite(data.max_speed):
         rows.append(("maximum feasible speed",
                      f"{speed_percent(data.max_speed)} of real time (could be shot at "
-                     f"{frame_rate(data.fps * data.max_speed)} fps)"))
+                     f"{frame_rate(data.fps * data.max_speed)} fps)"
+                     + (f", set by {data.max_speed_set_by}" if data.max_speed_set_by else "")))
     elif data.status not in ("unreachable", "lens_range"):
         rows.append(("maximum feasible speed", "not recorded in this file"))
     if data.has_take and s is not None:

@@ -79,6 +79,9 @@ class TimingReport:
             uniform slow-down fits.
         feasible_fps: The frame rate at which the move could be shot at ``max_speed``
             (``fps * max_speed``) [frames/s], for a later speed change in post.
+        set_by: What sets ``max_speed``: an axis's velocity, acceleration or jerk in the
+            shot (``"pan acceleration"``), or the run-up or run-out (``"the run-out from
+            frame 1120: iris's room to stop inside its limits"``); "" when nothing moves.
         limiting: Every (axis, quantity) the shot's own real-time timing exceeds (what forces
             a slower take), worst first.
         runup: The move from rest into the first frame: ``duration`` [s] of the ruckig move,
@@ -100,6 +103,7 @@ class TimingReport:
     position_range: dict[str, tuple[float, float]]
     max_speed: float
     feasible_fps: float
+    set_by: str
     limiting: list[LimitViolation]
     runup: dict[str, Any]
     runout: dict[str, Any]
@@ -358,6 +362,7 @@ def time_shot(
         position_range=position_range,
         max_speed=max_speed,
         feasible_fps=fps * max_speed,
+        set_by=real.set_by(),
         limiting=limiting,
         runup=up.report,
         runout=out.report,
@@ -408,6 +413,8 @@ class _RealTime:
     edges: str
     gentle_need: float
     gentle_problem: str  # why gentle ends do not fit the take's speed ("" when they do)
+    peaks: Peaks  # the shot's own, at real time
+    precision: float
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
@@ -420,7 +427,8 @@ class _RealTime:
         grid = _Grid.of(path, ticks, 1.0 / dt)
         fit = _EdgeFit.of(path, grid.stream, limits, edges, start, frames)
         # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
-        shot_need = grid.slowdown(limits)
+        peaks = grid.peaks()
+        shot_need = peaks_slowdown(peaks, limits)
         limiting = grid.violations(limits, frames)
         need = gentle_need = fit.factor(shot_need, precision)
         gentle_problem = ""
@@ -435,7 +443,34 @@ class _RealTime:
                 fit, need, edges = fast, fast_need, "fast"
         max_speed = (1.0 / need if need > 0 else math.inf) if math.isfinite(need) else 0.0
         return (cls(path, ticks, limiting, fit, shot_need, need, max_speed, edges, gentle_need,
-                    gentle_problem), grid if keep else None)
+                    gentle_problem, peaks, precision), grid if keep else None)
+
+    def set_by(self) -> str:
+        """What sets the maximum feasible speed, for people: the run-up or run-out (its
+        room or speed, where the ends need a slower take than the shot) or the shot's
+        axis and quantity that needs the slowest take ("" when nothing moves or no speed
+        fits)."""
+        if not (math.isfinite(self.need) and self.need > 0.0):
+            return ""
+        if self.need > self.shot_need * (1.0 + 4.0 * self.precision):
+            problem = self.fit.problem(self.need / (1.0 + 2.0 * self.precision))
+            if problem is not None:
+                name = self.fit.limits.names[problem.axis]
+                where = "the run-up into" if problem.side == "run-up" else "the run-out from"
+                act = "start" if problem.side == "run-up" else "stop"
+                need = {"position": f"{name}'s room to {act} inside its limits",
+                        "velocity": f"{name}'s velocity limit"}.get(problem.kind,
+                                                                     problem.text)
+                return f"{where} frame {problem.frame}: {need}"
+        use = self.peaks.use(self.fit.limits)
+        best, text = -1.0, ""
+        for quantity, power in (("velocity", 1.0), ("acceleration", 2.0), ("jerk", 3.0)):
+            slow = use[quantity] ** (1.0 / power)
+            j = int(np.argmax(slow))
+            if slow[j] > best:
+                best, text = float(slow[j]), f"{self.fit.limits.names[j]} {quantity}"
+        return text
+
 
 
 RATE_NOTE = 0.05
@@ -550,9 +585,8 @@ class _Grid:
                          path.knot_jerk_from_left() * speed**3)
         return cls(x, stream, x[k] - 0.5 / ticks, before)
 
-    def slowdown(self, limits: Limits) -> float:
-        return peaks_slowdown(Peaks.join([Peaks.of(self.stream), Peaks.of(self.before)]),
-                              limits)
+    def peaks(self) -> Peaks:
+        return Peaks.join([Peaks.of(self.stream), Peaks.of(self.before)])
 
     def violations(self, limits: Limits, frames: IntArray) -> list[LimitViolation]:
         return violations_in([(self.stream, FrameMap.of(self.x, frames)),
@@ -785,7 +819,7 @@ def _scale(
             raise _too_slow(s, path.n, dt)
         ticks = max(1, round(rate * s * dt))
         grid = _Grid.of(path, ticks, 1.0 / (s * dt))
-        k = grid.slowdown(limits)
+        k = peaks_slowdown(grid.peaks(), limits)
         if k > 1.0 + LIMIT_RTOL:
             s *= k * (1.0 + 1e-12)
             del grid  # before the next one is made
