@@ -540,6 +540,9 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
 
 
 MAX_SHOWN_SPEED = 100.0
+SWING_NOTE_M = 1e-3
+"""[m] A run-up or run-out that moves the camera further than this around a frame where the
+camera is at rest gets a note pointing at ``--edges still``."""
 """Above this many times real time the report says ">10000%" (the number means nothing)."""
 
 
@@ -664,6 +667,12 @@ def _report(r: dict[str, Any]) -> str:
                  "ends column: their peak use of the limits); the camera moves "
                  f"{distance(r['runup']['camera_travel_m'])} before the first frame, "
                  f"{distance(r['runout']['camera_travel_m'])} after the last")
+    swung = [name for name, part in (("first", r["runup"]), ("last", r["runout"]))
+             if part.get("camera_at_rest") and part["camera_travel_m"] > SWING_NOTE_M]
+    if swung and r.get("edges") != "still":
+        lines.append(f"  the camera is at rest on the {' and '.join(swung)} frame, the robot "
+                     "is not (the arm already reconfigures there): --edges still keeps it "
+                     "still, for a slower take")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

@@ -29,7 +29,7 @@ from camtraj.errors import (
     RobotFileError,
     ShotFileError,
 )
-from camtraj.ik import PathSolution, camera_holds, solve_path_report
+from camtraj.ik import PathSolution, camera_holds, camera_rests, solve_path_report
 from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
@@ -644,12 +644,16 @@ def summary(
     warnings = run_warnings(analysis)
 
     travel = camera_travel(analysis)
+    resting = camera_rests(analysis.targets, 1.0 / shot.fps)
 
     def extents(part: dict[str, Any], side: int) -> dict[str, Any]:
         return {
             "duration_s": part.get("duration", 0.0),
             # how far the camera moves from the first (last) frame's position before (after)
             "camera_travel_m": travel[side],
+            # whether the authored camera is at rest on that frame (--edges still keeps the
+            # robot still there too)
+            "camera_at_rest": resting[side],
             "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.
             "peak_use": part.get("peak_use", {}),

@@ -454,6 +454,10 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     assert travel["blender_crane_up"][0] >= 1e-2
     still, free = runs["crane_still"].summary_json(), runs["blender_crane_up"].summary_json()
     assert still["edges"] == "still" and free["edges"] == "gentle"
+    assert still["runup"]["camera_at_rest"] and free["runout"]["camera_at_rest"]
+    note = "the robot is not (the arm already reconfigures there): --edges still keeps it still"
+    assert note in runs["blender_crane_up"].proc.stdout
+    assert note not in runs["crane_still"].proc.stdout
     assert 0.9 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 

@@ -23,7 +23,7 @@ from camtraj.ik.path import (
     solve_path,
     solve_path_report,
 )
-from camtraj.ik.shot import camera_holds
+from camtraj.ik.shot import camera_holds, camera_rests
 from camtraj.ik.sm import IKSolution, motion_cost, solve_ik, traverse
 
 __all__ = [
@@ -34,6 +34,7 @@ __all__ = [
     "PathMargins",
     "PathSolution",
     "camera_holds",
+    "camera_rests",
     "motion_cost",
     "path_margins",
     "six_axis_solutions",
