@@ -668,7 +668,8 @@ def _report(r: dict[str, Any]) -> str:
                  f"{distance(r['runup']['camera_travel_m'])} before the first frame, "
                  f"{distance(r['runout']['camera_travel_m'])} after the last")
     swung = [name for name, part in (("first", r["runup"]), ("last", r["runout"]))
-             if part.get("camera_at_rest") and part["camera_travel_m"] > SWING_NOTE_M]
+             if part.get("camera_at_rest") and part["camera_travel_m"] > SWING_NOTE_M
+             and not part.get("from_start_pose")]
     if swung and r.get("edges") != "still":
         lines.append(f"  the camera is at rest on the {' and '.join(swung)} frame, the robot "
                      "is not (the arm already reconfigures there): --edges still keeps it "

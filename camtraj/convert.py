@@ -30,6 +30,7 @@ from camtraj.errors import (
     ShotFileError,
 )
 from camtraj.ik import PathSolution, camera_holds, camera_rests, solve_path_report
+from camtraj.ik.path import move_to_start
 from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
@@ -654,6 +655,7 @@ def summary(
             # whether the authored camera is at rest on that frame (--edges still keeps the
             # robot still there too)
             "camera_at_rest": resting[side],
+            **({"from_start_pose": options.start_from is not None} if side == 0 else {}),
             "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.
             "peak_use": part.get("peak_use", {}),
@@ -685,7 +687,7 @@ def summary(
         "feasible_fps": float(rep.feasible_fps),
         "peak_use": rep.peak_use,
         "runup": extents(rep.runup, 0),
-        "move_to_start": _move_to_start(path),
+        "move_to_start": _move_to_start(analysis),
         "margins": margins_summary(analysis),
         "runout": extents(rep.runout, 1),
         "warnings": warnings,
@@ -711,9 +713,13 @@ def camera_travel(analysis: Analysis) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def _move_to_start(path: PathSolution) -> dict[str, Any]:
-    """The move from the start (home or --start-from) to the first frame, for the summary."""
-    m = path.move_to_start
+def _move_to_start(analysis: Analysis) -> dict[str, Any]:
+    """The move from the start pose (home or --start-from) to where the take begins at rest
+    (the run-up's start: the first frame itself only where there is no run-up; nothing with
+    --start-from, where the take begins), for the summary."""
+    assert analysis.path is not None and analysis.take is not None
+    m = move_to_start(analysis.robot, analysis.path.move_to_start.start,
+                      analysis.take.q[0, :8])
     return {
         "duration_s": m.duration,
         "start": {k: axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.start, strict=True)},

@@ -352,9 +352,19 @@ def test_the_summary_reports_margins_and_the_move_to_start(robot: Robot) -> None
     assert m["wrist_singularity_deg"] == pytest.approx(
         math.degrees(float(np.abs(np.abs(tilt) - math.pi / 2).min())), abs=1e-6)
     assert 0.0 < m["full_stretch_deg"] < 180.0
+    # with --start-from the take begins there, at rest: nothing to move before it
     start = report["move_to_start"]
-    assert start["extent"]["track"] == pytest.approx(abs(q[0, 0] - 1.0))
-    assert start["extent"]["elbow"] == pytest.approx(math.degrees(abs(q[0, 4] + 0.5)))
+    assert start["duration_s"] == 0.0 and not any(start["extent"].values())
+    # from home, the move goes to where the take begins: the run-up's start, not the first
+    # frame (the crane-up's run-up moves the elbow on its way into the first frame)
+    analysis = analyse(shot, ConvertOptions())
+    take = analysis.take
+    assert take is not None and analysis.path is not None
+    begin, first = take.q[0, :8], analysis.path.q[0]
+    assert abs(begin[4] - first[4]) > 1e-3
+    start = summary(analysis, shot, None, ConvertOptions())["move_to_start"]
+    assert start["extent"]["track"] == pytest.approx(abs(begin[0] - robot.home[0]))
+    assert start["extent"]["elbow"] == pytest.approx(math.degrees(abs(begin[4] - robot.home[4])))
     assert start["duration_s"] > 0.0
 
 
