@@ -38,7 +38,11 @@ def frame_span(first: object, last: object, text: Callable[[Any], str] = str) ->
 
 
 def frame_runs(runs: Iterable[tuple[int, int]]) -> str:
-    """Runs of film frames (first, last): 'frames 12-19, 40' ('frames -3 to -1, 4')."""
+    """Runs of film frames (first, last): 'frames 12-19, 40' ('frames -3 to -1, 4'); one
+    frame alone: 'frame 40'."""
+    runs = list(runs)
+    if len(runs) == 1 and runs[0][0] == runs[0][1]:
+        return f"frame {runs[0][0]}"
     return "frames " + ", ".join(frame_span(a, b) if b != a else f"{a}" for a, b in runs)
 
 

@@ -566,3 +566,12 @@ def test_a_failing_file_is_named_not_taken_for_standard_output(
     assert stop.value.code == 1
     err = capsys.readouterr().err
     assert err == f"ERROR: cannot use {gone}: no such file or directory\n"
+
+
+def test_one_frame_alone_is_a_frame_not_frames() -> None:
+    """'on frame 1001', not 'on frames 1001' (trial 13); runs keep the plural."""
+    from camtraj.shown import frame_runs
+
+    assert frame_runs([(1001, 1001)]) == "frame 1001"
+    assert frame_runs([(12, 19), (40, 40)]) == "frames 12-19, 40"
+    assert frame_runs([(-3, -1)]) == "frames -3 to -1"

@@ -200,7 +200,7 @@ def test_a_contact_in_the_run_up_or_run_out_is_named_there_not_at_a_frame() -> N
     msg = str(out)
     assert msg.startswith("the run-out, 0.62 s after frame 12: the robot's elbow hub "
                           "(elbow_axis) goes 3.9 cm into /beam"), msg
-    assert "(frames 12, the run-out 0.22-0.62 s after frame 12 too close)" in msg, msg
+    assert "(frame 12, the run-out 0.22-0.62 s after frame 12 too close)" in msg, msg
     assert out.phase == "run-out" and out.frame == 12
     up = collision_error(Contact(1, 0.01, "carriage (link1)", "/wall"), moments, 0.05)
     assert str(up).startswith("the run-up, 0.25 s before frame 10: the robot's carriage"), up
