@@ -363,6 +363,14 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
                 f"the shot animates its {what} ({span}) "
                 f"but the lens {lens.name} has no {axis} calibration: the {axis} is not "
                 "driven")
+        driven = lens.axis(axis)
+        if driven is not None and not np.any(x):  # USD's "not authored": the motor holds home
+            home = driven.calibration.value(np.array([driven.home]))[0]
+            shown = (f"{_show(axis, float(home), driven.unit)}" if math.isfinite(home)
+                     else "infinity")
+            out.append(
+                f"the shot does not set its {what}: the {axis} motor holds at its home "
+                f"({shown}, lens file {lens.source})")
     return out
 
 

@@ -325,6 +325,28 @@ def test_animated_focus_and_stop_without_motors_warn(tmp_path: Path) -> None:
     assert re.search(r"f-stop \(f/[0-9.]+ to f/[0-9.]+\)", iris), iris
 
 
+def test_a_focus_and_stop_the_shot_leaves_unset_hold_at_home_and_say_so(tmp_path: Path) -> None:
+    """A shot that authors no focus distance or f-stop (0: a pinhole camera): the motors hold
+    at their homes (the lens file's first rows: 0.6 m, T2.8), and the run says so."""
+    ms = make_samples()
+    frames = np.arange(FIRST, FIRST + 49, dtype=np.float64)
+    s = ms.ease(np.linspace(0.0, 1.0, frames.size))
+    pos = np.stack([6.5 - 1.0 * s, np.zeros_like(s), np.full_like(s, 1.4)], axis=1)
+    pan, tilt = ms.look_at(pos, SUBJECT)
+    move = ms.Move(frames, pos, pan, tilt, focal_mm=35.0, focus_m=0.0, f_stop=0.0)
+    shot = tmp_path / "pinhole.usda"
+    shot.write_text(ms._header("camtraj test: pinhole", "Z", 1.0, frames, 24.0, "cam") + "\n"
+                    + ms._camera_prim_trs("cam", move, "Z", 1.0, "") + "\n", encoding="utf-8")
+    result = convert(shot, None, ConvertOptions(lens=str(ZOOM)))
+    assert any(w.startswith("the shot does not set its focus distance: the focus motor holds "
+                            "at its home (0.6 m") for w in result["warnings"]), result["warnings"]
+    assert any(w.startswith("the shot does not set its f-stop: the iris motor holds at its "
+                            "home (T2.8") for w in result["warnings"]), result["warnings"]
+    analysis = analyse(shot, ConvertOptions(lens=str(ZOOM)))
+    assert analysis.lens_q is not None
+    assert np.all(analysis.lens_q[:, 1:] == 0.0)  # both homes: the first rows' 0 deg
+
+
 def test_without_a_lens_nothing_changes(dolly: dict[str, Any]) -> None:
     """No --lens: the eight joints only, no lens metadata (byte identity with the code before
     issue 16 was checked by hand: see the branch's report)."""
