@@ -60,6 +60,9 @@ MAX_MOTOR = 1.0e6
 RANGE_RTOL = 1e-6
 """A lens quantity this close (relative) to the end of the calibrated range is inside it
 (USD keeps focal lengths, focus distances and stops as 32-bit floats: f/2.8 reads 2.7999999)."""
+RING_TURNS = 1.0
+"""A calibration table spanning more turns of its lens ring than this gets a warning (a lens
+ring turns less than once; degrees read as radians turn it 57 times as far)."""
 PRIME_RTOL = 1e-3
 """A shot's focal length this close (relative) to a prime's is the prime's: 0.05 mm on a 50 mm,
 far below what a lens is marked to (a zoom easing away from 32 mm read as off a 32 mm prime at
@@ -343,6 +346,13 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
     """What the lens cannot follow of the shot: a focal length a prime does not have, a
     focus distance or f-stop animated without a motor to drive."""
     out = []
+    for motor in lens.axes:  # a lens ring turns less than once: more reads as the wrong unit
+        turned = float(np.ptp(motor.calibration.motor))
+        if turned > RING_TURNS * 2.0 * math.pi:
+            out.append(
+                f"the lens file's {motor.name} table spans {math.degrees(turned):,.0f} deg of "
+                f"the ring ({turned / (2.0 * math.pi):.1f} turns; a lens ring turns less than "
+                f"once): is its angle_unit right? (lens file {lens.source})")
     if lens.axis("zoom") is None and lens.focal_length_mm is not None:
         fl = shot.focal_length_mm
         off = np.abs(fl - lens.focal_length_mm) > PRIME_RTOL * lens.focal_length_mm

@@ -407,3 +407,21 @@ def test_a_motor_limit_on_a_calibration_end_takes_the_shots_float_round_off(
     assert analysis.take is not None and analysis.lens_q is not None
     zoom, _, iris = analysis.lens_q.T
     assert np.all(iris == 0.0) and -1e-6 < zoom[0] < 0.0
+
+
+def test_a_table_that_turns_the_ring_many_times_warns_of_its_angle_unit(tmp_path: Path) -> None:
+    """Degrees written under angle_unit = "rad": the zoom table's 0-120 would turn the ring
+    19 times. The run goes on (the file is well formed) and warns, naming the table."""
+    text = ZOOM_TEXT.replace('angle_unit = "deg"', 'angle_unit = "rad"', 1)
+    path = tmp_path / "rad.toml"
+    path.write_text(text, encoding="utf-8")
+    lens = Lens.from_toml(path)
+    from camtraj.lens import lens_warnings
+    from camtraj.usd_shot import read_shot
+
+    out = lens_warnings(lens, read_shot(SHOTS / "maya_dolly_push_in.usda"))
+    zoom = next(w for w in out if w.startswith("the lens file's zoom table"))
+    assert "spans 6,875 deg of the ring (19.1 turns" in zoom and "angle_unit" in zoom
+    assert not any("of the ring" in w for w in lens_warnings(Lens.from_toml(ZOOM),
+                                                             read_shot(SHOTS /
+                                                                       "maya_dolly_push_in.usda")))
