@@ -305,3 +305,30 @@ def test_fails_like_scale_where_no_take_fits(limits: Limits) -> None:
     for mode in ("scale", "optimal"):
         with pytest.raises(TimingLimitError, match=r"run-up into frame 0 has no room"):
             time_shot(q, t, limits, mode=mode)
+
+
+def test_a_camera_hold_with_a_lens_move_inside_is_said_when_the_retime_changes_its_length(
+        limits: Limits) -> None:
+    """The camera holds still over frames 20-44 while the focus motor pulls 200 deg in that
+    second: the robot holds, the focus does not, so the hold is no hold of the take and the
+    retime plays it at the length the focus's limits allow. The take says so, with the
+    lengths its own frame times give."""
+    n = 70
+    t = np.arange(n) / FPS
+    s = np.clip((t - t[0]) / t[19], 0.0, 1.0)
+    q = np.tile(HOME, (n, 1))
+    q[:, 0] += 0.4 * (3 * s**2 - 2 * s**3)  # a truck into the hold, at rest there
+    u = np.clip((t - t[20]) / (t[44] - t[20]), 0.0, 1.0)
+    focus = np.radians(200.0) * (3 * u**2 - 2 * u**3)
+    lens = Limits(np.array([-0.1]), np.array([6.0]), np.radians([180.0]),
+                  np.radians([720.0]), np.radians([7200.0]), names=("focus",),
+                  kinds=("revolute",))
+    both = limits.joined(lens)
+    hold = np.zeros(n - 1, dtype=bool)
+    hold[20:44] = True
+    take = time_shot(np.hstack([q, focus[:, None]]), t, both, mode="optimal", hold=hold)
+    was = t[44] - t[20]
+    now = take.frame_times[44] - take.frame_times[20]
+    assert abs(now / was - 1.0) > 0.01, (now, was)
+    assert (f"frames 20-44: the camera holds still but focus moves, so the retime plays the "
+            f"hold in {now:.2f} s, not {was:.2f} s") in take.report.warnings

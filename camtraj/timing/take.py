@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.shown import scale_fit
+from camtraj.shown import frame_runs, scale_fit
 from camtraj.timing.clock import MAX_FRAME_RATE, on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
@@ -41,7 +41,7 @@ from camtraj.timing.limits import (
     violations_in,
 )
 from camtraj.timing.optimal import optimal
-from camtraj.timing.path import FramePath, Samples
+from camtraj.timing.path import HOLD_TOL, FramePath, Samples, runs
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -316,6 +316,8 @@ def time_shot(
             speed_factor = float(shot_t[-1] / (dt * (n - 1)))
             ticks = 0  # samples per frame vary
             shot_rate = 0.0
+            warnings += _stretched_holds(q, hold_mask, shot_t[frame_idx], dt, frames,
+                                         limits.names)
 
     # Position limits of the shot part as sampled in the take.
     pos_bad = [v for v in violations(shot, limits, FrameMap.of(shot_x, frames), LIMIT_RTOL)
@@ -592,6 +594,30 @@ class _Grid:
         return violations_in([(self.stream, FrameMap.of(self.x, frames)),
                               (self.before, FrameMap.of(self.before_x, frames))],
                              limits, LIMIT_RTOL)
+
+
+HOLD_LENGTH_RTOL = 0.01
+"""A camera hold whose length an optimal retime changes by more than this share is said."""
+
+
+def _stretched_holds(q: Array, hold: BoolArray | None, frame_times: Array, dt: float,
+                     frames: IntArray, names: tuple[str, ...]) -> list[str]:
+    """The camera holds an optimal retime plays at another length than the shot's: where
+    the camera holds still but an axis moves (a lens motor's focus pull, say), the hold is no
+    hold of the take, and its length follows that axis's limits."""
+    if hold is None:
+        return []
+    out = []
+    for a, b in runs(hold):
+        was, now = (b - a) * dt, float(frame_times[b] - frame_times[a])
+        if abs(now - was) <= HOLD_LENGTH_RTOL * was:
+            continue
+        moving = [names[j] for j in np.flatnonzero(np.ptp(q[a:b + 1], axis=0) > HOLD_TOL)]
+        out.append(
+            f"{frame_runs([(int(frames[a]), int(frames[b]))])}: the camera holds still but "
+            f"{', '.join(moving) or 'an axis'} moves, so the retime plays the hold in "
+            f"{now:.2f} s, not {was:.2f} s")
+    return out
 
 
 def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
