@@ -23,7 +23,7 @@ from functools import cached_property, lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.timing.path import end_jerk
+from camtraj.timing.path import end_jerk, runs
 from camtraj.timing.quintic import DEGREE, hermite_coefficients, solve_knot_derivatives
 
 Array = NDArray[np.float64]
@@ -155,10 +155,9 @@ def _responses(n: int, ends: tuple[str, str] = ("free", "free")
 
 def hold_runs(held: NDArray[np.bool_]) -> tuple[tuple[int, int], ...]:
     """The frames (first, last) of each run of held frame pairs (n - 1,): the camera holds
-    still from ``first`` to ``last``."""
-    edges = np.diff(np.concatenate([[0], held.astype(np.int8), [0]]))
-    return tuple((int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1),
-                                                   np.flatnonzero(edges == -1), strict=True))
+    still from ``first`` to ``last`` (the timing stage's :func:`~camtraj.timing.path.runs`,
+    as a tuple: :func:`spline_ops` caches by it)."""
+    return tuple(runs(held))
 
 
 @lru_cache(maxsize=4)  # per path length and holds: the solve's own, not kept for long
