@@ -540,10 +540,10 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
 
 
 MAX_SHOWN_SPEED = 100.0
+"""Above this many times real time the report says ">10000%" (the number means nothing)."""
 SWING_NOTE_M = 1e-3
 """[m] A run-up or run-out that moves the camera further than this around a frame where the
 camera is at rest gets a note pointing at ``--edges still``."""
-"""Above this many times real time the report says ">10000%" (the number means nothing)."""
 
 
 def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
@@ -667,13 +667,19 @@ def _report(r: dict[str, Any]) -> str:
                  "ends column: their peak use of the limits); the camera moves "
                  f"{distance(r['runup']['camera_travel_m'])} before the first frame, "
                  f"{distance(r['runout']['camera_travel_m'])} after the last")
-    swung = [name for name, part in (("first", r["runup"]), ("last", r["runout"]))
+    fr = r["frames"]
+    swung = [(frame, part) for frame, part in ((fr["first"], r["runup"]),
+                                               (fr["last"], r["runout"]))
              if part.get("camera_at_rest") and part["camera_travel_m"] > SWING_NOTE_M
              and not part.get("from_start_pose")]
     if swung and r.get("edges") != "still":
-        lines.append(f"  the camera is at rest on the {' and '.join(swung)} frame, the robot "
-                     "is not (the arm already reconfigures there): --edges still keeps it "
-                     "still, for a slower take")
+        where = " and ".join(f"frame {frame}" for frame, _ in swung)
+        lines.append(f"  the camera is still on {where} but the robot's axes are already "
+                     "moving there, so the run-up/run-out swings the camera around it: "
+                     "--edges still keeps the robot still there (gentle ends, a slower take)")
+    if r.get("edges_asked") == "still" and r.get("edges") != "still":
+        lines.append("  --edges still: the camera is at rest on neither end frame, so the "
+                     "ends are as --edges gentle makes them")
     if r.get("collision"):
         c = r["collision"]
         near = (f"nothing within {c['measured_within_m']:.3f} m" if c["closest_m"] is None

@@ -645,7 +645,9 @@ def summary(
     warnings = run_warnings(analysis)
 
     travel = camera_travel(analysis)
-    resting = camera_rests(analysis.targets, 1.0 / shot.fps)
+    # decided on the flange poses, as the solver decides --edges still
+    resting = camera_rests(analysis.targets @ np.linalg.inv(analysis.robot.camera2flange),
+                           1.0 / shot.fps)
 
     def extents(part: dict[str, Any], side: int) -> dict[str, Any]:
         return {
@@ -675,6 +677,7 @@ def summary(
         # as built: gentle where it fits; still where the robot rests on an end frame
         "edges": ("still" if any(path.rest) and rep.runup.get("edges") == "gentle"
                   else rep.runup.get("edges", options.edges)),
+        "edges_asked": options.edges,
         "speed_factor": float(take.speed_factor),
         "servo_rate_hz": round(float(take.rate), 9),  # 250.0, not 249.99999999999977
         # an optimal retime cuts each frame interval into its own equal steps: they vary

@@ -66,7 +66,7 @@ from camtraj.errors import CamtrajError, InputError
 from camtraj.folders import check_can_make
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
-    EDGE_MODES,
+    EDGE_OPTIONS,
     FOCAL_LENGTH_UNITS,
     OBJECTIVES,
     RATE_RANGE,
@@ -345,7 +345,7 @@ def openjd_template(
         if flag == "--focal-length-unit":
             definition["allowedValues"] = list(FOCAL_LENGTH_UNITS)
         if flag == "--edges":
-            definition["allowedValues"] = list(EDGE_MODES)
+            definition["allowedValues"] = list(EDGE_OPTIONS)
         definition["default"] = value
         is_path = flag in _PATH_FLAGS
         definition["description"] = description + (

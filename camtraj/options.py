@@ -19,7 +19,9 @@ import click
 from camtraj.errors import InputError
 
 TIMING_MODES = ("shot", "scale", "optimal")
-EDGE_MODES = ("gentle", "fast", "still")
+EDGE_OPTIONS = ("gentle", "fast", "still")
+"""--edges: the timing stage's run-up and run-out modes, and still (gentle ends where the
+camera does not rest; the robot still on an end frame where it does)."""
 OBJECTIVES = ("shot", "paper")
 FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
@@ -94,8 +96,8 @@ class ConvertOptions:
         if self.clearance is not None and not 0.0 <= self.clearance <= 5.0:
             msg = f"clearance must be between 0 and 5 m, got {self.clearance}"
             raise InputError(msg)
-        if self.edges not in EDGE_MODES:
-            msg = f"edges must be one of {', '.join(EDGE_MODES)}, got {self.edges!r}"
+        if self.edges not in EDGE_OPTIONS:
+            msg = f"edges must be one of {', '.join(EDGE_OPTIONS)}, got {self.edges!r}"
             raise InputError(msg)
 
     @property
@@ -248,7 +250,7 @@ def more_convert_options(func: F) -> F:
         ),
         click.option(
             "--edges",
-            type=click.Choice(EDGE_MODES),
+            type=click.Choice(EDGE_OPTIONS),
             default="gentle",
             show_default=True,
             help="Run-up and run-out: gentle = per axis no more acceleration and jerk than the "

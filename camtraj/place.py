@@ -62,8 +62,7 @@ def _solve(robot: Robot, flange2base: Array, problem: Problem, frame_interval: f
            frame_numbers: NDArray[np.int64]) -> PathSolution:
     """The whole-shot solver, in one place (re-point it here when the solver changes)."""
     return solve_path_report(robot, flange2base, problem.start, objective=problem.objective,
-                             frame_interval=frame_interval, frame_numbers=frame_numbers,
-                             still_ends=problem.still_ends)
+                             frame_interval=frame_interval, frame_numbers=frame_numbers)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -89,7 +88,6 @@ class Problem:
     name: str = ""  # the shot, for messages
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
     lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
-    still_ends: bool = False  # --edges still: the robot still where the camera rests at an end
 
 
 @dataclass(frozen=True)
@@ -695,8 +693,7 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
                       np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
                       obstacles=tuple(obstacles),
                       clearance=sf.clearance_m if clearance is None else clearance,
-                      name=one_line(shot_path), timing=timing, lens_q=lens_q,
-                      still_ends=options.edges == "still")
+                      name=one_line(shot_path), timing=timing, lens_q=lens_q)
     return problem, shot
 
 

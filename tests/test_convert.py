@@ -199,6 +199,7 @@ CONVERSIONS: dict[str, tuple[str, tuple[str, ...]]] = {
     "whip_shot": ("whip_pan", ("--timing", "shot")),
     "unreachable": ("unreachable", ()),
     "crane_still": ("blender_crane_up", ("--edges", "still")),
+    "crane_still_optimal": ("blender_crane_up", ("--edges", "still", "--timing", "optimal")),
 }
 
 
@@ -359,10 +360,10 @@ def frame_indices(take: ReadTake) -> NDArray[np.int64]:
 
 
 TIMED = ("whip_scale", "maya_optimal", "whip_optimal", "maya_dolly_push_in", "blender_crane_up",
-         "crane_still",
+         "crane_still", "crane_still_optimal",
          "orbit_animated_parent")
 #: Takes on a uniform servo grid (an optimal retime cuts each frame interval its own way).
-UNIFORM = frozenset(TIMED) - {"maya_optimal", "whip_optimal"}
+UNIFORM = frozenset(TIMED) - {"maya_optimal", "whip_optimal", "crane_still_optimal"}
 
 
 @pytest.mark.parametrize("key", TIMED)
@@ -422,12 +423,15 @@ def test_take_starts_and_ends_at_rest(runs: dict[str, Run], key: str) -> None:
 def _end_motion(robot: Robot, take: ReadTake) -> tuple[Array, Array]:
     """From the decoded samples: how far the camera (FK) moves from the first frame's position
     during the run-up and from the last frame's during the run-out (2,) [m], and each end
-    frame's joint velocity as the central difference of its neighbouring samples (2, 8)."""
+    frame's joint velocity as the central difference of its neighbouring samples (2, 8)
+    (one-sided where the frame is the take's first or last sample)."""
     idx = frame_indices(take)
     cams = robot.camera_pose(take.q)[:, :3, 3]
     travel = np.array([np.linalg.norm(cams[:idx[0] + 1] - cams[idx[0]], axis=1).max(),
                        np.linalg.norm(cams[idx[-1]:] - cams[idx[-1]], axis=1).max()])
-    speed = np.array([(take.q[i + 1] - take.q[i - 1]) / (take.t[i + 1] - take.t[i - 1])
+    last = take.q.shape[0] - 1  # a frame on the take's first or last sample: one-sided
+    speed = np.array([(take.q[min(i + 1, last)] - take.q[max(i - 1, 0)])
+                      / (take.t[min(i + 1, last)] - take.t[max(i - 1, 0)])
                       for i in (idx[0], idx[-1])])
     return travel, speed
 
@@ -438,27 +442,29 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     redundant axes on the first frame, and the run-up swings the camera around it; with
     ``--edges still`` every axis stands still on the first and last frame (the central
     difference of the samples around them: a thousandth of the velocity limit, where free
-    ends move some axis by a tenth of it), the camera moves under a millimetre before and
-    after (free: over a centimetre before), and the take is at most a tenth slower. The
-    summary's camera travel is what FK of the decoded samples measures."""
+    ends move some axis by a tenth of it), the camera does not move before or after them
+    (free: over a centimetre before), also when an optimal retime plays the shot faster,
+    and the take is at most 15% slower (measured: 0.90x). The summary's camera travel is
+    what FK of the decoded samples measures."""
     travel, speed = {}, {}
-    for key in ("blender_crane_up", "crane_still"):
+    for key in ("blender_crane_up", "crane_still", "crane_still_optimal"):
         travel[key], speed[key] = _end_motion(robot, runs[key].take())
         data = runs[key].summary_json()
         got = [data["runup"]["camera_travel_m"], data["runout"]["camera_travel_m"]]
         np.testing.assert_allclose(got, travel[key], rtol=0, atol=1e-6)
-    use = np.abs(speed["crane_still"]) / robot.max_velocity
-    assert use.max() <= 1e-3, f"still ends move at {use.max():.2g} of a velocity limit"
+    for key in ("crane_still", "crane_still_optimal"):
+        use = np.abs(speed[key]) / robot.max_velocity
+        assert use.max() <= 1e-3, f"{key}: the ends move at {use.max():.2g} of a velocity limit"
+        assert travel[key].max() <= 1e-9, key
     assert (np.abs(speed["blender_crane_up"]) / robot.max_velocity).max() >= 0.1
-    assert travel["crane_still"].max() <= 1e-3
     assert travel["blender_crane_up"][0] >= 1e-2
     still, free = runs["crane_still"].summary_json(), runs["blender_crane_up"].summary_json()
     assert still["edges"] == "still" and free["edges"] == "gentle"
     assert still["runup"]["camera_at_rest"] and free["runout"]["camera_at_rest"]
-    note = "the robot is not (the arm already reconfigures there): --edges still keeps it still"
+    note = "but the robot's axes are already moving there, so the run-up/run-out swings the camera"
     assert note in runs["blender_crane_up"].proc.stdout
     assert note not in runs["crane_still"].proc.stdout
-    assert 0.9 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
+    assert 0.85 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 
 # --------------------------------------------------------------------------------------------

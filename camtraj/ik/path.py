@@ -110,13 +110,20 @@ class PathSolution:
 
     def rest_axes(self, axes: int = 8) -> NDArray[np.bool_] | None:
         """``time_shot``'s ``rest`` for this path and ``axes - 8`` lens axes after its
-        joints (2, axes): the joints at rest where :attr:`rest` says, the lens motors free (a
-        focus pull may start while the camera stands still); None where nothing rests."""
-        if not any(self.rest):
-            return None
-        out = np.zeros((2, axes), dtype=bool)
-        out[:, :8] = np.array(self.rest)[:, None]
-        return out
+        joints (:func:`rest_mask`)."""
+        return rest_mask(self.rest, axes)
+
+
+def rest_mask(rest: tuple[bool, bool], axes: int = 8) -> NDArray[np.bool_] | None:
+    """``time_shot``'s ``rest`` (2, axes) for a path at rest on its first / last frame as
+    ``rest`` says, with ``axes - 8`` lens axes after its joints: the joints at rest there,
+    the lens motors free (a focus pull may start while the camera stands still); None where
+    nothing rests."""
+    if not any(rest):
+        return None
+    out = np.zeros((2, axes), dtype=bool)
+    out[:, :8] = np.array(rest)[:, None]
+    return out
 
 
 def solve_path(
@@ -285,10 +292,10 @@ def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
     cost = replace(ShotCost.for_robot(robot, dt), holds=hold_runs(held), rests=rest)
     limits = Limits.from_robot(robot)
     times = np.arange(n) * dt
-    rest_mask = np.array(rest)[:, None].repeat(8, axis=1) if any(rest) else None
+    rest_axes = rest_mask(rest)
 
     def take_speed(q: Array) -> float:  # to compare answers: a thousandth is plenty
-        return (feasible_speed(q, times, limits, rest=rest_mask, precision=1e-3) if n > 1
+        return (feasible_speed(q, times, limits, rest=rest_axes, precision=1e-3) if n > 1
                 else math.inf)
 
     grids = dict.fromkeys([(s.track_samples, s.extend_samples),

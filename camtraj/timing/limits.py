@@ -296,9 +296,20 @@ def slowdown(s: Samples, limits: Limits) -> float:
 
 def peaks_slowdown(peaks: Peaks, limits: Limits) -> float:
     """:func:`slowdown` of the samples with these peaks."""
+    return slowest(peaks, limits)[0]
+
+
+def slowest(peaks: Peaks, limits: Limits) -> tuple[float, int, str]:
+    """The slow-down the samples with these peaks need, and the axis and quantity that need
+    it: velocity scales with the speed, acceleration with its square, jerk with its cube."""
     use = peaks.use(limits)
-    kv, ka, kj = (float(use[k].max()) for k in ("velocity", "acceleration", "jerk"))
-    return max(kv, math.sqrt(ka), math.pow(kj, 1.0 / 3.0))
+    best = (-1.0, 0, "velocity")
+    for quantity, power in (("velocity", 1.0), ("acceleration", 2.0), ("jerk", 3.0)):
+        need = use[quantity] ** (1.0 / power)
+        j = int(np.argmax(need))
+        if float(need[j]) > best[0]:
+            best = (float(need[j]), j, quantity)
+    return best
 
 
 def violations(

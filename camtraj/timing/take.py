@@ -37,6 +37,7 @@ from camtraj.timing.limits import (
     peak_use,
     peaks_slowdown,
     shot_error,
+    slowest,
     violations,
     violations_in,
 )
@@ -461,17 +462,10 @@ class _RealTime:
                 where = "the run-up into" if problem.side == "run-up" else "the run-out from"
                 act = "start" if problem.side == "run-up" else "stop"
                 need = {"position": f"{name}'s room to {act} inside its limits",
-                        "velocity": f"{name}'s velocity limit"}.get(problem.kind,
-                                                                     problem.text)
-                return f"{where} frame {problem.frame}: {need}"
-        use = self.peaks.use(self.fit.limits)
-        best, text = -1.0, ""
-        for quantity, power in (("velocity", 1.0), ("acceleration", 2.0), ("jerk", 3.0)):
-            slow = use[quantity] ** (1.0 / power)
-            j = int(np.argmax(slow))
-            if slow[j] > best:
-                best, text = float(slow[j]), f"{self.fit.limits.names[j]} {quantity}"
-        return text
+                        "velocity": f"{name}'s velocity limit"}.get(problem.kind)
+                return f"{where} frame {problem.frame}: {need}" if need else problem.text
+        _, axis, quantity = slowest(self.peaks, self.fit.limits)
+        return f"{self.fit.limits.names[axis]} {quantity}"
 
 
 
