@@ -821,7 +821,14 @@ def base_paths(shots: list[Any], rev: str, work: Path) -> tuple[dict[str, Any], 
 
 def bench_speeds(robot: Robot, rev: str, work: Path, quick: bool) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
-    from tests.shot_set import EFFORT, acceptance_set, max_speed, motion_end_set, speeds
+    from tests.shot_set import (
+        EFFORT,
+        acceptance_set,
+        max_speed,
+        motion_end_set,
+        speeds,
+        still_speed,
+    )
 
     folder = work / "set"
     folder.mkdir()
@@ -835,13 +842,14 @@ def bench_speeds(robot: Robot, rev: str, work: Path, quick: bool) -> dict[str, A
     for which, s in [("set", s) for s in shots] + [("end", s) for s in ends]:
         log(f"table 5: {s.name}")
         sp = speeds(robot, s, EFFORT)
+        still = still_speed(robot, s)
         q_base = base.get(s.name)
         base_speed = (max_speed(robot, q_base, s.fps, s.targets) if q_base is not None
                       else math.nan)
         rows.append({"shot": s.name, "set": which,
                      "frames": int(s.targets.shape[0]), "fps": s.fps,
                      "default": sp.default, "paper": sp.paper, "effort": sp.effort,
-                     "base": base_speed})
+                     "base": base_speed, "still": still})
     return {"rows": rows, "base_rev": rev, "base_note": note, "effort": EFFORT, "quick": quick}
 
 
@@ -860,14 +868,29 @@ def _speed_summary(rows: list[dict[str, Any]], effort: float, rev: str) -> list[
             f"default / default of {rev} {med('base')}"]
 
 
+def _still_summary(rows: list[dict[str, Any]]) -> str:
+    """How much --edges still costs where it changes the take."""
+    pairs = [(r["still"], r["default"]) for r in rows
+             if math.isfinite(r.get("still", math.nan)) and r["default"] > 0]
+    if not pairs:
+        return "no move rests at an end"
+    xs = [ratio(a, b) for a, b in pairs]
+    lost = sum(b >= 1.0 > a for a, b in pairs)
+    return (f"{len(pairs)} moves rest at an end: still / default median "
+            f"x{fmt(statistics.median(xs))} (x{fmt(min(xs))} to x{fmt(max(xs))}); {lost} of "
+            "them leave real time")
+
+
 def print_speeds(res: dict[str, Any]) -> None:
     k, rev = res["effort"], res["base_rev"]
     rows = []
     for r in res["rows"]:
+        still = r.get("still", math.nan)
         rows.append([r["shot"], str(r["frames"]), fmt(r["fps"], 5), fmt(r["default"]),
                      fmt(r["paper"]), fmt(r["effort"]), fmt(r["base"]),
                      "yes" if r["default"] >= 1.0 else "no",
-                     fmt(ratio(r["default"], r["paper"])), fmt(ratio(r["default"], r["effort"]))])
+                     fmt(ratio(r["default"], r["paper"])), fmt(ratio(r["default"], r["effort"])),
+                     fmt(still) if math.isfinite(still) else "-"])
     main_rows = [r for r in res["rows"] if r["set"] == "set"]
     end_rows = [r for r in res["rows"] if r["set"] == "end"]
     table(
@@ -875,7 +898,7 @@ def print_speeds(res: dict[str, Any]) -> None:
         f"default vs paper vs the default at {k:g}x effort vs the default of {rev}"
         + (" (--quick: a subset)" if res["quick"] else ""),
         ["shot", "frames", "fps", "default", "paper", f"{k:g}x effort", f"default {rev}",
-         "real time", "default / paper", f"default / {k:g}x"],
+         "real time", "default / paper", f"default / {k:g}x", "--edges still"],
         rows,
         [f"shot set ({len(main_rows)}): " + "; ".join(_speed_summary(main_rows, k, rev)),
          f"end-in-motion moves ({len(end_rows)}): "
@@ -886,6 +909,9 @@ def print_speeds(res: dict[str, Any]) -> None:
          "a path whose spline leaves a position limit between frames is given the speed its "
          "velocities, accelerations and jerks allow (the timing stage's number with the error); "
          "0: no speed at all (its run-up or run-out leaves a position limit)",
+         "--edges still: the default solved and timed with the robot still on an end frame "
+         "where the camera rests (- where it rests at neither end: the default's own); "
+         + _still_summary(res["rows"]),
          *([f"base revision: {res['base_note'][:200]}"] if res.get("base_note") else [])],
     )
 

@@ -763,6 +763,26 @@ class Speeds:
     q_effort: Array
 
 
+def still_speed(robot: Robot, shot: SetShot) -> float:
+    """The default's maximum feasible speed with ``--edges still`` (solved and timed with the
+    robot still on an end frame where the camera rests); nan where it rests at neither end."""
+    from camtraj.ik import camera_holds, solve_path_report
+    from camtraj.timing import Limits, TimingLimitError, time_shot
+
+    path = solve_path_report(robot, shot.targets, frame_interval=1.0 / shot.fps,
+                             still_ends=True)
+    if not any(path.rest):
+        return math.nan
+    times = np.arange(path.q.shape[0]) / shot.fps
+    try:
+        return float(time_shot(path.q, times, Limits.from_robot(robot), mode="scale",
+                               hold=camera_holds(shot.targets),
+                               rest=path.rest_axes()).report.max_speed)
+    except TimingLimitError as exc:
+        speed = float(exc.max_speed)
+        return speed if math.isfinite(speed) else 0.0
+
+
 def speeds(robot: Robot, shot: SetShot, k: float = EFFORT) -> Speeds:
     """The default objective, ``paper`` and the default at ``k`` times the effort on ``shot``."""
     from camtraj.ik import solve_path

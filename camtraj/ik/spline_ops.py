@@ -129,19 +129,21 @@ def _derivative(c: Array, d: int, tau: float) -> Array:
     return np.asarray(acc)
 
 
-def _responses(n: int, clamp: tuple[bool, bool] = (False, False)
+def _responses(n: int, ends: tuple[str, str] = ("free", "free")
                ) -> dict[tuple[int, float], Array]:
     """Dense (rows, n) responses of each (order, evaluation point): knots 0..n-1 (tau 0, the
-    last knot as the end of the last piece) and piece middles (tau 0.5). ``clamp``: whether
-    the first / last knot is clamped to rest (velocity and acceleration zero, as the timing
-    stage clamps a knot next to a hold or an end where the camera is at rest) rather than a
-    free end of the shot."""
+    last knot as the end of the last piece) and piece middles (tau 0.5). ``ends``: each of the
+    first and last knot is ``"free"`` (a free end of the shot), ``"rest"`` (a free end where
+    the camera is at rest: zero velocity, :func:`~camtraj.ik.shot.camera_rests`) or ``"hold"``
+    (next to a hold: velocity and acceleration zero, the held frames equal), as the timing
+    stage fits them."""
     y = np.eye(n)
     none = np.zeros((n, n), dtype=bool)
     clamped = none.copy()
-    clamped[0], clamped[-1] = clamp
+    clamped[0], clamped[-1] = (end == "hold" for end in ends)
+    rest = np.array([[end == "rest"] * n for end in ends])
     v, w = solve_knot_derivatives(y, clamped, np.zeros((n, n)), np.zeros((n, n)),
-                                  end_jerk(y, none[1:]))
+                                  end_jerk(y, none[1:]), rest=rest)
     c = hermite_coefficients(y, v, w)  # (n - 1, 6, n)
     out = {}
     for d in (1, 2, 3):
@@ -169,8 +171,8 @@ def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
     equal), and the timing stage fits each moving stretch between holds as its own spline,
     its knots next to a hold clamped to rest: each stretch gets its own operators, and the
     rows of a hold are zero (a still robot uses no limit). ``rests``: whether the camera is at
-    rest on the first / last frame (:func:`~camtraj.ik.shot.camera_rests`) and the robot
-    with it: the timing stage clamps the spline to rest there, as next to a hold.
+    rest on the first / last frame (:func:`~camtraj.ik.shot.camera_rests`): the spline's
+    velocity is zero there.
 
     A derivative of order d of the spline is zero on polynomials below degree d (the natural
     quintic spline reproduces them), so it is a weighted sum of the path's d-th differences;
@@ -181,18 +183,17 @@ def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
     width = 2 * k + 2
     orders = (1, 1, 2, 2, 3, 3)
     counts = (n, n - 1, n, n - 1, n, n - 1)
+    free = tuple("rest" if r else "free" for r in rests)
     if not holds:
-        coef, inner = _stretch(n, ("rest" if rests[0] else "free",
-                                   "rest" if rests[1] else "free"))
+        coef, inner = _stretch(n, (free[0], free[1]))
         return BandOps(orders, counts, coef, -k, inner)
     coef = np.zeros((n, width, len(orders)))
     inner = (0, 0)
     start = 0
     for a, b in (*holds, (n - 1, n - 1)):
         if a > start:  # the moving stretch of frames start..a
-            ends = ("hold" if start > 0 else "rest" if rests[0] else "free",
-                    "hold" if a < n - 1 else "rest" if rests[1] else "free")
-            part, (ia, ib) = _stretch(a - start + 1, ends)
+            part, (ia, ib) = _stretch(a - start + 1, ("hold" if start > 0 else free[0],
+                                                      "hold" if a < n - 1 else free[1]))
             coef[start:a + 1] = part
             if ib - ia > inner[1] - inner[0]:  # one shift-invariant range: the longest
                 inner = (start + ia, start + ib)
@@ -201,10 +202,10 @@ def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
 
 
 REST_ROWS = 12
-"""Rows next to a shot end clamped where the camera rests whose band is cut as first
-differences (:func:`_stretch`); the rest as d-th differences. Measured on eased paths of
-40-400 frames, the operators' worst error against the spline: 6 rows 7.5%, 12 rows 2.4% (the
-same path with free ends: 2.4%), 24 rows 5.4%; every row as first differences 8%."""
+"""Rows next to an end at rest whose band is cut as first differences (:func:`_stretch`); the
+rest as d-th differences. Measured on eased paths of 40-400 frames, the operators' worst
+error against the spline: 6 rows 4.1%, 12 rows 2.4% (the same path with free ends: 2.4%), 24
+rows 5.4%; all rows as first differences 8%, none 13%."""
 
 
 def _band_cut(resp: Array, undo: int, m: int, d: int) -> Array:
@@ -233,22 +234,21 @@ def _band_cut(resp: Array, undo: int, m: int, d: int) -> Array:
 
 
 def _stretch(n: int, ends: tuple[str, str]) -> tuple[Array, tuple[int, int]]:
-    """:func:`spline_ops`' weights (n, width, 6) of one spline of n >= 2 frames, each end
-    ``"free"``, ``"hold"`` (next to a hold) or ``"rest"`` (a shot end where the camera
-    rests), the last two clamped to rest (:func:`_responses`), and its shift-invariant rows."""
+    """:func:`spline_ops`' weights (n, width, 6) of one spline of n >= 2 frames, with its
+    ends free, at rest or next to a hold (:func:`_responses`), and its shift-invariant
+    rows."""
     k = HALF_WIDTH
     small = n <= 2 * _END + 4 * k
     m = n if small else 2 * _END + 4 * k
-    dense = _responses(m, (ends[0] != "free", ends[1] != "free"))
+    dense = _responses(m, ends)
     coef = np.zeros((n, 2 * k + 2, len(dense)))
     inner = (0, n)
     for i, ((d, _tau), resp) in enumerate(dense.items()):
         # A free spline reproduces polynomials below degree 5, so its order-d responses are
         # weights of d-th differences; clamped to rest next to a hold it reproduces only
-        # constants, so its responses are weights of first differences. Clamped at a shot's
-        # end where the camera rests, it reproduces only constants near that end and nearly
-        # all of them further in: the rows near it are cut as first differences, the others
-        # as d-th.
+        # constants among them, so its responses are weights of first differences. At rest
+        # at a free end it reproduces only constants near that end, and nearly all of them
+        # further in: the rows near it are cut as first differences, the others as d-th.
         if "hold" in ends:
             cut = _band_cut(resp, 1, m, d)
         else:

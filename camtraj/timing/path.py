@@ -11,10 +11,10 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
   solutions) and every moving stretch is its own spline, clamped to the hold's velocity and
   zero acceleration. One axis passing a turning point is no hold: it stays on the spline.
 * **An end at rest stays at rest.** Where the camera is at rest at the first or last frame
-  (an eased start or stop), the caller says so and the spline is clamped there as next to a
-  hold: velocity and acceleration zero. The robot then stands still on that frame in every
-  timing mode (a retime that plays the shot faster scales a velocity or acceleration there,
-  and zero stays zero), so no run-up or run-out moves it.
+  (an eased start or stop), the caller says so and the spline's velocity there is zero; its
+  acceleration stays free and its jerk is set as at a free end, so a move eased from rest
+  (any polynomial with zero slope at the end, up to a cubic) is reproduced exactly. The
+  robot then stands still on that frame, however its redundant axes move after it.
 * **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
   beyond the frames. The spline's velocity and acceleration there follow from the frames
   themselves; only its jerk is set, to that of a least-squares cubic through the end frames,
@@ -111,8 +111,8 @@ class FramePath:
         pair). A pair is a hold when it is one and every joint moves by at most
         :data:`HOLD_TOL` (the whole robot still); one axis passing a turning point is not.
         ``rest`` (2, 8): per axis, whether the first / last frame is at rest (the camera is
-        at rest there, :func:`~camtraj.ik.shot.camera_rests`): the spline is clamped to rest
-        there, velocity and acceleration zero, as next to a hold (default: free ends).
+        at rest there, :func:`~camtraj.ik.shot.camera_rests`): the spline's velocity there
+        is zero (default: free ends).
         """
         n, m = q.shape
         diff = np.diff(q, axis=0)
@@ -126,13 +126,10 @@ class FramePath:
         w_given = np.zeros((n, m))
         clamped[1:] |= still
         clamped[:-1] |= still
-        if rest is not None:  # an end at rest: clamped to rest (v_given, w_given stay 0)
-            clamped[0] |= rest[0]
-            clamped[-1] |= rest[1]
         v_given[1:] = np.where(still, diff, 0.0)
         v_given[:-1] = np.where(still, diff, v_given[:-1])
         jerk = end_jerk(q, still)
-        v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+        v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk, rest=rest)
         # Each knot's room: the range, widened to the frame itself where a frame lies beyond
         # it (by round-off, or a violation the limit checks report): never further out.
         lo, hi = np.minimum(lower, q), np.maximum(upper, q)
@@ -146,7 +143,7 @@ class FramePath:
             clamped |= out
             v_given = np.where(out, v_in, v_given)
             w_given = np.where(out, w_in, w_given)
-            v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk)
+            v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk, rest=rest)
         # Still out after the refits: pull knots in without refitting until no piece leaves
         # its range. A piece whose two knots are both pulled in is inside (convex hull), so
         # this ends after at most n passes.

@@ -54,6 +54,7 @@ def hermite_coefficients(y: Array, v: Array, w: Array) -> Array:
 def solve_knot_derivatives(
     y: Array, clamped: BoolArray, v_given: Array, w_given: Array,
     end_jerk: Array | None = None, end_snap: Array | None = None,
+    rest: BoolArray | None = None,
 ) -> tuple[Array, Array]:
     """First and second knot derivatives of the C4 quintic spline through ``y``.
 
@@ -62,7 +63,8 @@ def solve_knot_derivatives(
     * clamped (``clamped[i]``): ``v = v_given[i]``, ``w = w_given[i]``; the curve on either
       side is fitted independently, so a clamped knot splits the spline into stretches;
     * the first or last knot, not clamped: a natural end (zero jerk and snap there, or the
-      given ``end_jerk`` and ``end_snap``);
+      given ``end_jerk`` and ``end_snap``); an end at rest (``rest``) has zero velocity and
+      the given jerk instead (its acceleration is free);
     * otherwise an interior knot: jerk and snap continuous across it.
 
     Two knots, both natural, are joined by the straight line.
@@ -74,6 +76,9 @@ def solve_knot_derivatives(
         w_given: Second derivatives of the clamped knots, shape (n, m) (others ignored).
         end_jerk, end_snap: Third and fourth derivatives at the first and last knot, (2, m)
             (default zero), where those are free ends.
+        rest: Whether the first / last knot of each axis, where free, is at rest, (2, m)
+            (default: none): its snap condition becomes ``v = 0`` (a polynomial with zero
+            slope there is reproduced).
 
     Returns:
         ``(v, w)``, each of shape (n, m); equal to the given values (bit for bit) at clamped
@@ -111,6 +116,12 @@ def solve_knot_derivatives(
     di[:, -1] = [[-12.0, 3.0], [-16.0, 3.0]]
     rhs[:, -1, 0] = -20.0 * d[-1] + ej[1] / 3.0
     rhs[:, -1, 1] = -30.0 * d[-1] + es[1] / 12.0
+    at_rest = np.zeros((2, m), dtype=bool) if rest is None else np.asarray(rest, dtype=bool)
+    for side, knot, far in ((0, 0, up), (1, n - 1, lo)):  # at rest: v = 0 for the snap
+        axes = at_rest[side]
+        di[axes, knot, 1] = [1.0, 0.0]
+        far[axes, knot, 1] = 0.0
+        rhs[axes, knot, 1] = 0.0
     # Clamped knots.
     cl = clamped.T  # (m, n)
     lo[cl] = 0.0
@@ -121,7 +132,7 @@ def solve_knot_derivatives(
     up[:, -1] = 0.0
     same: dict[bytes, list[int]] = {}  # axes with the same clamped knots: the same matrix
     for axis in range(m):
-        same.setdefault(cl[axis].tobytes(), []).append(axis)
+        same.setdefault(cl[axis].tobytes() + at_rest[:, axis].tobytes(), []).append(axis)
     x = _solve_block_tridiagonal(
         lo.transpose(2, 3, 0, 1), di.transpose(2, 3, 0, 1), up.transpose(2, 3, 0, 1),
         rhs.transpose(2, 0, 1), list(same.values()),
