@@ -375,8 +375,10 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
                 "driven")
         driven = lens.axis(axis)
         if driven is not None and not np.any(x):  # USD's "not authored": the motor holds home
-            home = driven.calibration.value(np.array([driven.home]))[0]
-            shown = (f"{_show(axis, float(home), driven.unit)}" if math.isfinite(home)
+            cal = driven.calibration
+            home = float(cal.value(np.array([driven.home]))[0])
+            at_inf = bool(np.isinf(cal.quantity[-1])) and abs(driven.home - cal.motor[-1]) < 1e-9
+            shown = (_show(axis, home, driven.unit) if math.isfinite(home) and not at_inf
                      else "infinity")
             out.append(
                 f"the shot does not set its {what}: the {axis} motor holds at its home "

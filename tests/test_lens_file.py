@@ -210,7 +210,11 @@ def test_unset_focus_and_stop_hold_at_home(tmp_path: Path) -> None:
     q = lens_positions(lens, _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0]))
     assert q[:, 1].tolist() == [math.radians(300.0)] * 2  # focus home: infinity
     assert q[:, 2].tolist() == [0.0, 0.0]  # iris home: the first row
-    assert lens_warnings(lens, _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0])) == []
+    assert lens_warnings(lens, _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0])) == [
+        "the shot does not set its focus distance: the focus motor holds at its home "
+        f"(infinity, lens file {path})",
+        f"the shot does not set its f-stop: the iris motor holds at its home (T2.8, lens file "
+        f"{path})"]
 
 
 @pytest.mark.parametrize(
