@@ -877,8 +877,8 @@ def _still_summary(rows: list[dict[str, Any]]) -> str:
     xs = [ratio(a, b) for a, b in pairs]
     lost = sum(b >= 1.0 > a for a, b in pairs)
     return (f"{len(pairs)} moves rest at an end: still / default median "
-            f"x{fmt(statistics.median(xs))} (x{fmt(min(xs))} to x{fmt(max(xs))}); {lost} of "
-            "them leave real time")
+            f"x{fmt(statistics.median(xs))} (x{fmt(min(xs))} to x{fmt(max(xs))}); moves "
+            f"at real time only with free ends: {lost}")
 
 
 def print_speeds(res: dict[str, Any]) -> None:
