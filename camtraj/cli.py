@@ -675,8 +675,9 @@ def _report(r: dict[str, Any]) -> str:
     if swung and r.get("edges") != "still":
         where = " and ".join(f"frame {frame}" for frame, _ in swung)
         lines.append(f"  the camera is still on {where} but the robot's axes are already "
-                     "moving there, so the run-up/run-out swings the camera around it: "
-                     "--edges still keeps the robot still there (gentle ends, a slower take)")
+                     "moving there, so the run-up/run-out swings the camera around "
+                     f"{'it' if len(swung) == 1 else 'them'}: --edges still keeps the robot "
+                     "still there (gentle ends, a slower take)")
     if r.get("edges_asked") == "still" and r.get("edges") != "still":
         lines.append("  --edges still: the camera is at rest on neither end frame, so the "
                      "ends are as --edges gentle makes them")
