@@ -502,7 +502,7 @@ def _unreachable_report(shot: str, exc: UnreachableFramesError,
 
 
 PLACE_FLAGS = ("--camera", "--robot", "--set-file", "--frames", "--timing", "--clearance",
-               "--lens")
+               "--lens", "--edges")
 """The convert options ``camtraj place`` takes too (the unreachable note carries them)."""
 
 

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
 from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.inputs import one_line
-from camtraj.options import TIMING_MODES
+from camtraj.options import EDGE_OPTIONS, TIMING_MODES
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon, yaw_pose
@@ -62,7 +62,8 @@ def _solve(robot: Robot, flange2base: Array, problem: Problem, frame_interval: f
            frame_numbers: NDArray[np.int64]) -> PathSolution:
     """The whole-shot solver, in one place (re-point it here when the solver changes)."""
     return solve_path_report(robot, flange2base, problem.start, objective=problem.objective,
-                             frame_interval=frame_interval, frame_numbers=frame_numbers)
+                             frame_interval=frame_interval, frame_numbers=frame_numbers,
+                             still_ends=problem.edges == "still")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -88,6 +89,7 @@ class Problem:
     name: str = ""  # the shot, for messages
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
     lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
+    edges: str = "gentle"  # convert's --edges: the run-up and run-out it will time the shot with
 
 
 @dataclass(frozen=True)
@@ -218,7 +220,8 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
         take = time_shot(q_time, times, limits, mode="scale",
                          rate=problem.rate if full else min(problem.rate, 100.0),
                          frame_numbers=frames, hold=camera_holds(flange2base),
-                         rest=path.rest_axes(q_time.shape[1]))
+                         rest=path.rest_axes(q_time.shape[1]),
+                         edges="gentle" if problem.edges == "still" else problem.edges)
     except TimingLimitError as exc:
         speed = exc.max_speed if math.isfinite(exc.max_speed) else 0.0
         return Result(x, y, yaw_deg, full, 1.0, True, False, speed, "position", marg, str(exc))
@@ -693,7 +696,8 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
                       np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
                       obstacles=tuple(obstacles),
                       clearance=sf.clearance_m if clearance is None else clearance,
-                      name=one_line(shot_path), timing=timing, lens_q=lens_q)
+                      name=one_line(shot_path), timing=timing, lens_q=lens_q,
+                      edges=options.edges)
     return problem, shot
 
 
@@ -720,6 +724,7 @@ def place(
     top: int = 3,
     lens: str | None = None,
     timing: str = "shot",
+    edges: str = "gentle",
 ) -> PlaceReport:
     """Search the placement of the robot for a shot (see the module docstring).
 
@@ -735,7 +740,7 @@ def place(
     jobs = default_jobs(jobs)
     # the options convert would take: the same checks of the clearance and of every input file
     options = ConvertOptions(robot=robot, set_file=set_file, camera=camera, frames=frames,
-                             clearance=clearance, lens=lens)
+                             clearance=clearance, lens=lens, edges=edges)
     require_regular_files(shot_path, options)
     rob = load_robot(options)
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
@@ -803,6 +808,9 @@ def columns(r: Result) -> str:
 @click.option("--lens", type=click.Path(exists=True, dir_okay=False), metavar="LENS.toml",
               help="Lens file: its zoom, focus and iris motors are timed with the joints, as "
                    "convert --lens times them (default: the robot file's [lens], if any).")
+@click.option("--edges", type=click.Choice(EDGE_OPTIONS), default="gentle", show_default=True,
+              help="How the shots will be converted: convert's --edges (still: the robot "
+                   "still on an end frame where the camera rests, a slower take).")
 @click.option("--timing", type=click.Choice(TIMING_MODES), default=None,
               help="How the shots will be converted: a placement where a shot fits only "
                    "slowed down serves it with scale or optimal (default: shot, each at its own "
@@ -820,7 +828,7 @@ def columns(r: Result) -> str:
 def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | None,
                   robot: str | None, set_file: str | None, camera: str | None,
                   frames: str | None, clearance: float | None, lens: str | None,
-                  timing: str | None, jobs: int | None, top: int, as_json: bool,
+                  edges: str, timing: str | None, jobs: int | None, top: int, as_json: bool,
                   output: str | None, quiet: bool) -> None:
     """Find where to lay the track for SHOT: the robot base's x, y and yaw on the floor.
 
@@ -874,11 +882,13 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
             if layout_name is None:
                 report = place(shots[0], robot=robot, set_file=set_file, camera=camera,
                                frames=span, clearance=clearance, jobs=jobs,
-                               progress=progress, top=top, lens=lens, timing=timing or "shot")
+                               progress=progress, top=top, lens=lens, timing=timing or "shot",
+                               edges=edges)
             else:
                 _place_scene(ctx, outputs, members, layout_name, robot=robot,
                              set_file=set_file, clearance=clearance, jobs=jobs,
-                             progress=progress, as_json=as_json, output=output, lens=lens)
+                             progress=progress, as_json=as_json, output=output, lens=lens,
+                             edges=edges)
                 return
         except CamtrajError as exc:
             click.echo(f"ERROR: {exc}", err=True)
@@ -913,7 +923,7 @@ def _write(ctx: click.Context, outputs: Any, output: str, text: str, as_json: bo
 def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str, *,
                  robot: str | None, set_file: str | None, clearance: float | None,
                  jobs: int | None, progress: bool, as_json: bool, output: str | None,
-                 lens: str | None = None) -> None:
+                 lens: str | None = None, edges: str = "gentle") -> None:
     """``camtraj place`` of a scene: one layout for every shot, or the smallest split."""
     import json
 
@@ -922,7 +932,8 @@ def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str
     from camtraj.set_file import to_toml
 
     report = place_scene(members, name=name, robot=robot, set_file=set_file,
-                         clearance=clearance, jobs=jobs, progress=progress, lens=lens)
+                         clearance=clearance, jobs=jobs, progress=progress, lens=lens,
+                         edges=edges)
     click.echo(json.dumps(report.to_json(), indent=2) if as_json else scene_table(report))
     if not report.ok or report.layout is None:
         click.echo(f"ERROR: no single layout serves every shot of the scene; the smallest "

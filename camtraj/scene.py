@@ -200,6 +200,7 @@ def place_scene(
     jobs: int | None = None,
     progress: bool = False,
     lens: str | None = None,
+    edges: str = "gentle",
 ) -> SceneReport:
     """One placement for every shot of a scene, or the smallest split (module docstring).
 
@@ -212,7 +213,7 @@ def place_scene(
     start = time.perf_counter()
     jobs = default_jobs(jobs)
     options = [ConvertOptions(robot=robot, set_file=set_file, camera=s.camera, frames=s.frames,
-                              clearance=clearance, timing=s.timing, lens=lens)
+                              clearance=clearance, timing=s.timing, lens=lens, edges=edges)
                for s in shots]
     for s, opt in zip(shots, options, strict=True):
         require_regular_files(s.path, opt)

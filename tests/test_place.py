@@ -450,3 +450,27 @@ def test_place_with_scale_timing_takes_a_placement_where_the_shot_fits_slowed_do
     scene.write_text(f'[[shot]]\npath = "{shot}"\n', encoding="utf-8")
     proc = run("place", "--scene", scene, "--timing", "scale")
     assert proc.returncode == 2 and "--timing per shot in the scene file" in proc.stderr
+
+
+def test_place_times_still_ends_as_convert_does(tmp_path: Path) -> None:
+    """With --edges still, place solves and times each placement as convert --edges still
+    does (the robot still on the eased first and last frame): its speed at the placed base is
+    convert's with the same option, and below the speed with free ends there."""
+    from tests.test_lens_axes import _dolly_zoom
+
+    shot = _dolly_zoom(tmp_path)  # eased from rest to rest
+    sf = tmp_path / "set.toml"
+    sf.write_text("[floor]\nregion = [[-10.15, -1.5, 0], [9.15, -1.5, 0], [9.15, 0.1, 0], "
+                  "[-10.15, 0.1, 0]]\n[search]\nyaw_deg = 0.0\n")
+    proc = subprocess.run([sys.executable, "-m", "camtraj", "place", shot, "--set-file", sf,
+                           "--top", "1", "--json", "-q", "-j", "1", "--edges", "still"],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    best = json.loads(proc.stdout)["placements"][0]
+    at = (best["x"], best["y"], 0.0, best["yaw_deg"])
+    still = analyse(shot, ConvertOptions(placement=at, edges="still", timing="scale"))
+    free = analyse(shot, ConvertOptions(placement=at, timing="scale"))
+    assert still.take is not None and free.take is not None and still.path is not None
+    assert still.path.rest == (True, True)
+    assert best["max_speed"] == pytest.approx(still.take.report.max_speed, rel=1e-2)
+    assert still.take.report.max_speed < free.take.report.max_speed
