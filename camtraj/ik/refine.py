@@ -66,6 +66,12 @@ REFINE_STAGES = len(_STAGES)
 #: follow 2.43x -> 2.87x, median 1.002x; the smallest share of 10x the effort 0.94 -> 0.985
 #: (at 1e-11 the follow stays at 0.95 of it).
 DAMPING_FLOOR = 1e-12
+#: The damping every stage starts from at most. A stage that ends at a corner of the
+#: corridor (a frame's track on its interval's end, say) grows the damping there by 8 per
+#: failed trial; carried into the next stage, that damping left every later stage without a
+#: step (the truck past the track's end: stages 2-4 kept stage 1's take, 0.913x real time,
+#: with the damping at 1e19-1e37; started from this it reaches 1.000x, 10x the effort 1.004x).
+MU_START = 1e-3
 #: A stage has converged after this many rounds in a row that each lower its objective by
 #: less than the tolerance and by no more than the round before. While the damping still
 #: shrinks from its start, each round gains more than the last though all gain little: on
@@ -138,7 +144,7 @@ class Refinement:
         self.tie = _Tie.of(held) if held is not None else None
         self.x, self.y = x0.copy(), y0.copy()
         self.stages_done = 0
-        self.mu = 1e-3  # the damping, carried from stage to stage
+        self.mu = MU_START  # the damping, carried from stage to stage (at most MU_START)
         self.corridor = _Corridor(robot, targets, lo1, hi1) if x0.shape[0] >= 2 else None
         # the start and every stage's answer by the timing stage (which also sees what the
         # objective's model leaves out: gentle ends, the room they need): the fastest wins
@@ -167,7 +173,8 @@ class Refinement:
                         room=self.stages_done > 1)
         self.x, self.y, self.mu = _descend(self.robot, stage, self.corridor, self.targets,
                                            self.branch, self.x, self.y, self.rounds,
-                                           loosen * self.tolerance, self.mu, floor, self.tie)
+                                           loosen * self.tolerance, min(self.mu, MU_START),
+                                           floor, self.tie)
         v = self.speed(self.y[:, :8])
         if v >= self.best[0]:
             self.best = (v, self.x, self.y)
