@@ -676,8 +676,8 @@ def _report(r: dict[str, Any]) -> str:
         where = " and ".join(f"frame {frame}" for frame, _ in swung)
         lines.append(f"  the camera is still on {where} but the robot's axes are already "
                      "moving there, so the run-up/run-out swings the camera around "
-                     f"{'it' if len(swung) == 1 else 'them'}: --edges still keeps the robot "
-                     "still there (gentle ends, a slower take)")
+                     f"{'it' if len(swung) == 1 else 'them'}: --edges still (the default) "
+                     "keeps the robot still there, for a slower take")
     if r.get("edges_asked") == "still" and r.get("edges") != "still":
         lines.append("  --edges still: the camera is at rest on neither end frame, so the "
                      "ends are as --edges gentle makes them")

@@ -48,13 +48,13 @@ class ConvertOptions:
             older exporters write).
         clearance: Distance the robot must keep from the set file's obstacles [m]; default
             the set file's ``[collision] clearance_m``.
-        edges: How the run-up and run-out move: ``"gentle"`` (per axis no more of the
-            acceleration and jerk limits than the shot uses, at least a quarter of them) or
-            ``"fast"`` (the full limits: the shortest, time-optimal run-up and run-out) or
-            ``"still"`` (gentle, and where the camera is at rest on the first or last frame,
-            an eased start or stop, the robot stands still there too: the solver keeps its
-            redundant axes from moving on that frame, so no run-up or run-out moves the
-            camera around it; the take is a few percent slower).
+        edges: How the run-up and run-out move: ``"still"`` (the default: where the camera
+            is at rest on the first or last frame, an eased start or stop, the robot stands
+            still there too, its velocity zero on that frame, and the solver plans for it;
+            elsewhere as gentle), ``"gentle"`` (per axis no more of the acceleration and
+            jerk limits than the shot uses, at least a quarter of them; the robot may move
+            on a still end frame, for a take a few percent faster) or ``"fast"`` (the full
+            limits: the shortest, time-optimal run-up and run-out).
         lens: A lens file (:mod:`camtraj.lens`): its zoom, focus and iris motors are timed
             and written with the joints; default the robot file's ``[lens]``, if any.
     """
@@ -70,7 +70,7 @@ class ConvertOptions:
     objective: str | None = None
     focal_length_unit: str = "schema"
     clearance: float | None = None
-    edges: str = "gentle"
+    edges: str = "still"
     lens: str | None = None
 
     def __post_init__(self) -> None:
@@ -251,12 +251,13 @@ def more_convert_options(func: F) -> F:
         click.option(
             "--edges",
             type=click.Choice(EDGE_OPTIONS),
-            default="gentle",
+            default="still",
             show_default=True,
-            help="Run-up and run-out: gentle = per axis no more acceleration and jerk than the "
-            "shot uses (at least 25% of the limits); fast = the full limits (shortest); "
-            "still = gentle, and where the camera is at rest on the first or last frame the "
-            "robot stands still there too (no run-up moves the camera; a few percent slower).",
+            help="Run-up and run-out: still = where the camera is at rest on the first or last "
+            "frame the robot stands still there too, elsewhere as gentle; gentle = per axis no "
+            "more acceleration and jerk than the shot uses (at least 25% of the limits), the "
+            "robot free to move on a still end frame (a few percent faster); fast = the full "
+            "limits (shortest).",
         ),
         click.option(
             "--lens",
@@ -308,7 +309,7 @@ def build_options(
     objective: str | None = None,
     focal_length_unit: str = "schema",
     clearance: float | None = None,
-    edges: str = "gentle",
+    edges: str = "still",
     lens: str | None = None,
 ) -> ConvertOptions:
     """Build convert options from the command-line strings of the option decorators.
@@ -361,7 +362,7 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
         pairs.append(("--focal-length-unit", options.focal_length_unit))
     if options.clearance is not None:
         pairs.append(("--clearance", repr(float(options.clearance))))
-    if options.edges != "gentle":
+    if options.edges != "still":
         pairs.append(("--edges", options.edges))
     if options.lens is not None:
         pairs.append(("--lens", str(options.lens)))

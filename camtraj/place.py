@@ -89,7 +89,7 @@ class Problem:
     name: str = ""  # the shot, for messages
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
     lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
-    edges: str = "gentle"  # convert's --edges: the run-up and run-out it will time the shot with
+    edges: str = "still"  # convert's --edges: the run-up and run-out it will time the shot with
 
 
 @dataclass(frozen=True)
@@ -724,7 +724,7 @@ def place(
     top: int = 3,
     lens: str | None = None,
     timing: str = "shot",
-    edges: str = "gentle",
+    edges: str = "still",
 ) -> PlaceReport:
     """Search the placement of the robot for a shot (see the module docstring).
 
@@ -808,7 +808,7 @@ def columns(r: Result) -> str:
 @click.option("--lens", type=click.Path(exists=True, dir_okay=False), metavar="LENS.toml",
               help="Lens file: its zoom, focus and iris motors are timed with the joints, as "
                    "convert --lens times them (default: the robot file's [lens], if any).")
-@click.option("--edges", type=click.Choice(EDGE_OPTIONS), default="gentle", show_default=True,
+@click.option("--edges", type=click.Choice(EDGE_OPTIONS), default="still", show_default=True,
               help="How the shots will be converted: convert's --edges (still: the robot "
                    "still on an end frame where the camera rests, a slower take).")
 @click.option("--timing", type=click.Choice(TIMING_MODES), default=None,
@@ -923,7 +923,7 @@ def _write(ctx: click.Context, outputs: Any, output: str, text: str, as_json: bo
 def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str, *,
                  robot: str | None, set_file: str | None, clearance: float | None,
                  jobs: int | None, progress: bool, as_json: bool, output: str | None,
-                 lens: str | None = None, edges: str = "gentle") -> None:
+                 lens: str | None = None, edges: str = "still") -> None:
     """``camtraj place`` of a scene: one layout for every shot, or the smallest split."""
     import json
 

@@ -200,7 +200,7 @@ def place_scene(
     jobs: int | None = None,
     progress: bool = False,
     lens: str | None = None,
-    edges: str = "gentle",
+    edges: str = "still",
 ) -> SceneReport:
     """One placement for every shot of a scene, or the smallest split (module docstring).
 

@@ -730,10 +730,12 @@ def with_effort(robot: Robot, k: float) -> Robot:
     ))
 
 
-def max_speed(robot: Robot, q: Array, fps: float, targets: Array) -> float:
+def max_speed(robot: Robot, q: Array, fps: float, targets: Array,
+              rest: NDArray[np.bool_] | None = None) -> float:
     """The timing stage's maximum feasible speed of the joint path ``q`` (n, 8) at ``fps``, as
     a fraction of real time (``inf``: nothing moves), timed as ``convert`` times it: still
-    where the camera ``targets`` (n, 4, 4) hold.
+    where the camera ``targets`` (n, 4, 4) hold, and at rest on the end frames ``rest``
+    (``PathSolution.rest_axes``) says.
 
     A path whose spline leaves a position limit between frames still gets the speed its
     velocities, accelerations and jerks allow (the timing stage reports it with the error); a
@@ -745,7 +747,7 @@ def max_speed(robot: Robot, q: Array, fps: float, targets: Array) -> float:
     times = np.arange(q.shape[0]) / fps
     try:
         return float(time_shot(q, times, Limits.from_robot(robot), mode="scale",
-                               hold=camera_holds(targets)).report.max_speed)
+                               hold=camera_holds(targets), rest=rest).report.max_speed)
     except TimingLimitError as exc:
         speed = float(exc.max_speed)
         return speed if math.isfinite(speed) else 0.0
@@ -753,7 +755,10 @@ def max_speed(robot: Robot, q: Array, fps: float, targets: Array) -> float:
 
 @dataclass(frozen=True)
 class Speeds:
-    """A shot solved three ways, and the maximum feasible speed of each."""
+    """A shot solved three ways, and the maximum feasible speed of each: the default as
+    ``convert`` runs it (``--edges still``: the robot still on an end frame where the camera
+    rests; ``rest`` is its ``time_shot`` rest mask), ``paper`` (the papers' method, free
+    ends) and the default at k times the effort (still ends too)."""
 
     default: float
     paper: float
@@ -761,36 +766,29 @@ class Speeds:
     q_default: Array
     q_paper: Array
     q_effort: Array
+    rest: NDArray[np.bool_] | None = None
 
 
-def still_speed(robot: Robot, shot: SetShot) -> float:
-    """The default's maximum feasible speed with ``--edges still`` (solved and timed with the
-    robot still on an end frame where the camera rests); nan where it rests at neither end."""
-    from camtraj.ik import camera_holds, solve_path_report
-    from camtraj.timing import Limits, TimingLimitError, time_shot
+def gentle_speed(robot: Robot, shot: SetShot) -> float:
+    """The default's maximum feasible speed with ``--edges gentle`` (free ends: the robot may
+    move on an end frame where the camera rests)."""
+    from camtraj.ik import solve_path
 
-    path = solve_path_report(robot, shot.targets, frame_interval=1.0 / shot.fps,
-                             still_ends=True)
-    if not any(path.rest):
-        return math.nan
-    times = np.arange(path.q.shape[0]) / shot.fps
-    try:
-        return float(time_shot(path.q, times, Limits.from_robot(robot), mode="scale",
-                               hold=camera_holds(shot.targets),
-                               rest=path.rest_axes()).report.max_speed)
-    except TimingLimitError as exc:
-        speed = float(exc.max_speed)
-        return speed if math.isfinite(speed) else 0.0
+    q = solve_path(robot, shot.targets, frame_interval=1.0 / shot.fps)
+    return max_speed(robot, q, shot.fps, shot.targets)
 
 
 def speeds(robot: Robot, shot: SetShot, k: float = EFFORT) -> Speeds:
-    """The default objective, ``paper`` and the default at ``k`` times the effort on ``shot``."""
-    from camtraj.ik import solve_path
+    """The default objective as ``convert`` runs it, ``paper`` and the default at ``k`` times
+    the effort on ``shot``."""
+    from camtraj.ik import solve_path, solve_path_report
 
     dt = 1.0 / shot.fps
-    q = solve_path(robot, shot.targets, frame_interval=dt)
+    p = solve_path_report(robot, shot.targets, frame_interval=dt, still_ends=True)
     qp = solve_path(robot, shot.targets, objective="paper", frame_interval=dt)
-    qk = solve_path(with_effort(robot, k), shot.targets, frame_interval=dt)
-    return Speeds(max_speed(robot, q, shot.fps, shot.targets),
+    pk = solve_path_report(with_effort(robot, k), shot.targets, frame_interval=dt,
+                           still_ends=True)
+    return Speeds(max_speed(robot, p.q, shot.fps, shot.targets, p.rest_axes()),
                   max_speed(robot, qp, shot.fps, shot.targets),
-                  max_speed(robot, qk, shot.fps, shot.targets), q, qp, qk)
+                  max_speed(robot, pk.q, shot.fps, shot.targets, pk.rest_axes()),
+                  p.q, qp, pk.q, p.rest_axes())

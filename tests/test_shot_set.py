@@ -167,7 +167,9 @@ def test_the_objectives_model_of_the_speed_is_the_timing_stages_on_every_shot(
             continue
         held = camera_holds(shot.targets)
         cost = dataclasses.replace(ShotCost.for_robot(robot, 1.0 / shot.fps),
-                                   holds=hold_runs(held))
+                                   holds=hold_runs(held),
+                                   rests=(False, False) if s.rest is None
+                                   else (bool(s.rest[0, 0]), bool(s.rest[1, 0])))
         model = 1.0 / cost.peak(s.q_default)
         if abs(model / s.default - 1.0) > MODEL_RTOL:
             failures.append(f"{shot.name}: model {model:.3f} x real time, take "
@@ -291,13 +293,15 @@ def convert_problem(take_for: dict[str, object], limits: Limits) -> str | None:
     return " | ".join(errors)
 
 
-def timed(q: Array, shot: SetShot, limits: Limits) -> dict[str, object]:
-    """The takes ``convert`` makes of the joint path ``q`` (default objective, from home)."""
+def timed(q: Array, shot: SetShot, limits: Limits,
+          rest: NDArray[np.bool_] | None = None) -> dict[str, object]:
+    """The takes ``convert`` makes of the joint path ``q`` (default objective, from home; at
+    rest on the end frames ``rest`` says)."""
     out: dict[str, object] = {}
     times = np.arange(q.shape[0]) / shot.fps
     for mode in ("shot", "scale"):
         try:
-            out[mode] = time_shot(q, times, limits, mode=mode)
+            out[mode] = time_shot(q, times, limits, mode=mode, rest=rest)
         except TimingLimitError as exc:
             out[mode] = str(exc)
         if isinstance(out[mode], Take) and not take_problems(out[mode], limits):  # type: ignore[arg-type]
@@ -310,7 +314,8 @@ def test_every_shot_converts_with_shot_or_scale_timing_inside_every_limit(
     limits = Limits.from_robot(robot)
     failures = []
     for shot in shots:
-        problem = convert_problem(timed(solved[shot.name].q_default, shot, limits), limits)
+        s = solved[shot.name]
+        problem = convert_problem(timed(s.q_default, shot, limits, s.rest), limits)
         if problem is not None:
             failures.append(f"{shot.name}: {problem}")
     _fail_all("no jerk-limited take inside the limits", failures, len(shots))
