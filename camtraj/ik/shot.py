@@ -72,14 +72,20 @@ rest: an eased start or stop (the shipped samples, eased from and to rest, read 
 2.5e-4 m/s at their ends; a camera creeping at a millimetre a second moves 40 µm a frame)."""
 REST_TURN = math.radians(0.1)
 """[rad/s] The turning rate below which a camera end is at rest (with :data:`REST_SPEED`)."""
+REST_SHARE = 0.02
+"""A camera end is at rest only where it also moves (and turns) slower than this share of the
+move's largest step between frames: a creep at a constant half a millimetre a second is in
+motion at its ends (held to rest there, its spline would start with a jerk the move never
+has), an eased move's ends read 1e-4 of its pace and less."""
 
 
 def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
     """Whether the camera (or flange) is at rest on the first / last frame: the velocity of
     the timing stage's spline through its poses there (:mod:`camtraj.timing.path`, free
     ends: an eased move's zero slope is read from its frames) is below :data:`REST_SPEED`
-    and :data:`REST_TURN`. The robot is at rest there too (the path's velocity is zero on
-    that frame: no run-up or run-out swings the camera around a still first or last frame)."""
+    and :data:`REST_TURN`, and below :data:`REST_SHARE` of the move's own pace. The robot is
+    at rest there too (the path's velocity is zero on that frame: no run-up or run-out
+    swings the camera around a still first or last frame)."""
     from camtraj.timing.path import end_jerk
     from camtraj.timing.quintic import solve_knot_derivatives
 
@@ -90,6 +96,9 @@ def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
     free = np.zeros(coords.shape, dtype=bool)
     zero = np.zeros(coords.shape)
     v, _ = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
+    # the move's own pace: its largest step between frames, in position and in turn
+    steps = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1).max()
+    turns = np.linalg.norm(np.diff(targets[:, :3, :3], axis=0), axis=(1, 2)).max() / math.sqrt(2)
     out = []
     for k in (0, n - 1):
         pose = v[k].reshape(3, 4)  # d pose / d frame
@@ -97,7 +106,8 @@ def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
         rate = 0.5 * math.hypot(turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
                                 turn[1, 0] - turn[0, 1])
         speed = float(np.linalg.norm(pose[:, 3]))
-        out.append(speed <= REST_SPEED * dt and rate <= REST_TURN * dt)
+        out.append(speed <= min(REST_SPEED * dt, REST_SHARE * steps)
+                   and rate <= min(REST_TURN * dt, REST_SHARE * turns))
     return out[0], out[1]
 
 
