@@ -72,6 +72,9 @@ rest: an eased start or stop (the shipped samples, eased from and to rest, read 
 2.5e-4 m/s at their ends; a camera creeping at a millimetre a second moves 40 µm a frame)."""
 REST_TURN = math.radians(0.1)
 """[rad/s] The turning rate below which a camera end is at rest (with :data:`REST_SPEED`)."""
+ROUND_OFF = 1e-12
+"""[m or rad per frame] A velocity this small is round-off: at rest whatever the move's pace
+(a pan alone has no pace in position)."""
 REST_SHARE = 0.02
 """A camera end is at rest only where it also moves (and turns) slower than this share of the
 move's largest step between frames: a creep at a constant half a millimetre a second is in
@@ -106,8 +109,8 @@ def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
         rate = 0.5 * math.hypot(turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
                                 turn[1, 0] - turn[0, 1])
         speed = float(np.linalg.norm(pose[:, 3]))
-        out.append(speed <= min(REST_SPEED * dt, REST_SHARE * steps)
-                   and rate <= min(REST_TURN * dt, REST_SHARE * turns))
+        out.append(speed <= min(REST_SPEED * dt, max(REST_SHARE * steps, ROUND_OFF))
+                   and rate <= min(REST_TURN * dt, max(REST_SHARE * turns, ROUND_OFF)))
     return out[0], out[1]
 
 
