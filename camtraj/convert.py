@@ -721,8 +721,7 @@ def _move_to_start(analysis: Analysis) -> dict[str, Any]:
     (the run-up's start: the first frame itself only where there is no run-up; nothing with
     --start-from, where the take begins), for the summary."""
     assert analysis.path is not None and analysis.take is not None
-    m = move_to_start(analysis.robot, analysis.path.move_to_start.start,
-                      analysis.take.q[0, :8])
+    m = move_to_start(analysis.robot, analysis.path.start, analysis.take.q[0, :8])
     return {
         "duration_s": m.duration,
         "start": {k: axis_value(k, float(v)) for k, v in zip(JOINT_NAMES, m.start, strict=True)},

@@ -292,7 +292,8 @@ def test_an_end_at_rest_reproduces_a_move_eased_from_rest(rest: tuple[bool, bool
     by the spline with that end at rest (velocity zero, acceleration free, jerk that of the
     least-squares cubic through the end frames), and the velocity there is zero; a
     free end gives the same curve (it reproduces any cubic), so resting costs such a move
-    nothing."""
+    nothing. (An end clamped to rest, acceleration zero as well, fails here: the smoothstep
+    starts accelerating; the test below fails where the rest condition is ignored.)"""
     t = np.arange(30, dtype=float)
     if rest == (True, True):  # zero slope at both ends: the smoothstep
         y = 3 * (t / 29) ** 2 - 2 * (t / 29) ** 3

@@ -68,11 +68,12 @@ OBJECTIVES = ("shot", "paper")
 
 @dataclass(frozen=True)
 class MoveToStart:
-    """The move from the start (home or ``--start-from``) to the shot's first frame.
+    """The move from the start (home or ``--start-from``) to a pose, at rest at both ends
+    (``convert``: to where the take begins, the run-up's start).
 
     Attributes:
         start: Start joint vector (8,) [m, rad].
-        travel: First frame minus start (8,) [m, rad]; the move's extent on each axis (a
+        travel: The pose minus start (8,) [m, rad]; the move's extent on each axis (a
             rest-to-rest move of one axis does not overshoot).
         duration: Time of the slowest axis's fastest rest-to-rest move within its velocity,
             acceleration and jerk limits [s] (all axes synchronised to it).
@@ -93,7 +94,7 @@ class PathSolution:
         within_step: (n,) False where a step from the previous frame exceeds an axis's
             velocity limit times the frame interval (always True without a frame interval).
         objective: ``"shot"`` or ``"paper"``.
-        move_to_start: The move from the start to the first frame.
+        start: The joint vector the robot starts from (8,) [m, rad]: home or ``start``.
         margins: The smallest distances to limits and singularities over the shot.
         rest: Whether the path stands still on its first / last frame (``still_ends`` asked
             and the camera at rest there, :func:`~camtraj.ik.shot.camera_rests`): whatever
@@ -104,7 +105,7 @@ class PathSolution:
     cost: Array
     within_step: NDArray[np.bool_]
     objective: str
-    move_to_start: MoveToStart
+    start: Array
     margins: PathMargins
     rest: tuple[bool, bool] = (False, False)
 
@@ -214,8 +215,7 @@ def solve_path_report(
     if frame_interval is not None and n > 1:
         bound = robot.max_velocity * frame_interval * (1.0 + 1e-9) + 1e-12
         steps[1:] = np.all(np.abs(np.diff(q, axis=0)) <= bound, axis=1)
-    return PathSolution(q, cost, steps, obj, move_to_start(robot, first, q[0]),
-                        path_margins(robot, q), rest)
+    return PathSolution(q, cost, steps, obj, first, path_margins(robot, q), rest)
 
 
 def _check_targets(targets: ArrayLike) -> Array:
@@ -452,7 +452,7 @@ def _rescue_empty_frames(robot: Robot, targets: Array, cand: Candidates,
 
 
 def move_to_start(robot: Robot, start: Array, q0: Array) -> MoveToStart:
-    """The fastest synchronised rest-to-rest move from ``start`` to ``q0`` (per-axis
+    """The fastest synchronised rest-to-rest move from ``start`` to the pose ``q0`` (per-axis
     time-optimal jerk-limited profiles; the slowest axis sets the duration)."""
     travel = q0 - start
     durations = [

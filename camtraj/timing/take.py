@@ -468,7 +468,6 @@ class _RealTime:
         return f"{self.fit.limits.names[axis]} {quantity}"
 
 
-
 RATE_NOTE = 0.05
 """A servo rate this far (relative) from the one asked is said (250 -> 240 Hz at 24 fps is
 not)."""
