@@ -17,13 +17,19 @@ Once the outputs are committed (:func:`ignore_from_now`) both signals are ignore
 operating system, so one arriving while the process exits (when Python has put the default
 handlers back) cannot kill a run whose result is on disk: it ends with its own exit code.
 
-This module imports nothing but :mod:`signal`: the command line installs it before any other
-import, so that a signal in its first milliseconds is handled too.
+A stop raised where Python cannot pass it on (a weakref callback of the import system's
+module locks, say) is "unraisable": Python would print it as a traceback and go on. The
+stop is recorded all the same and :func:`check` raises it, so :func:`install` keeps such a
+stop off stderr (every other unraisable exception is printed as before).
+
+This module imports nothing but :mod:`signal` and :mod:`sys`: the command line installs it
+before any other import, so that a signal in its first milliseconds is handled too.
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -92,6 +98,18 @@ def install() -> None:
     """
     _state.pending, _state.raised, _state.depth, _state.ignoring = None, False, 0, False
     _set_handlers(_handler)
+    if sys.unraisablehook is not _quiet_unraisable:
+        _quiet_unraisable.default = sys.unraisablehook  # type: ignore[attr-defined]
+        sys.unraisablehook = _quiet_unraisable
+
+
+def _quiet_unraisable(unraisable: sys.UnraisableHookArgs, /) -> None:
+    """Keep a stop Python could not raise off stderr (it is recorded: :func:`check` raises
+    it); print anything else as Python would."""
+    if isinstance(unraisable.exc_value, Interrupted):
+        _state.raised = False  # not raised after all: the next check() raises it
+        return
+    _quiet_unraisable.default(unraisable)  # type: ignore[attr-defined]
 
 
 def ignore() -> None:
