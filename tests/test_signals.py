@@ -486,6 +486,7 @@ def test_a_stop_python_cannot_raise_is_kept_off_stderr_and_raised_at_the_next_ch
         gc.collect()
         assert [type(e) for e in passed_on] == [ValueError]
     finally:
+        interrupts.install()  # forget the recorded stop: later tests in this process run on
         for s, h in old.items():
             signal.signal(s, h)
         sys.unraisablehook = old_hook
