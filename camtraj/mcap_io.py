@@ -580,7 +580,7 @@ class TakeData:
         target: Requested camera poses ``camera2base``, shape (n, 4, 4) [m].
         achieved: Camera poses of the solutions (FK), shape (n, 4, 4) [m].
         focal_length_mm: Focal length per frame [mm], shape (n,).
-        focus_distance_m: Focus distance per frame [m], shape (n,).
+        focus_distance_m: Focus distance per frame [m], shape (n,); inf: at infinity.
         f_stop: Aperture per frame (f-number), shape (n,).
         fps: Film frame rate [1/s], the /tf sampling rate.
         horizontal_aperture_mm: Film back width per frame [mm], shape (n,); None: USD's
@@ -658,7 +658,7 @@ class TakeData:
         self._array("target", self.target, (n, 4, 4))
         self._array("achieved", self.achieved, (n, 4, 4))
         for name in ("focal_length_mm", "focus_distance_m", "f_stop"):
-            self._array(name, getattr(self, name), (n,))
+            self._array(name, getattr(self, name), (n,), infinite=name == "focus_distance_m")
         if self.camera_focal_length_mm is not None:
             self._array("camera_focal_length_mm", self.camera_focal_length_mm, (n,))
         for name, fallback in (("horizontal_aperture_mm", _USD_APERTURE_MM[0]),
@@ -678,12 +678,15 @@ class TakeData:
             raise ValueError(msg)
         object.__setattr__(self, "fps", fps)
 
-    def _array(self, name: str, value: ArrayLike, shape: tuple[int, ...] | None) -> Array:
+    def _array(self, name: str, value: ArrayLike, shape: tuple[int, ...] | None,
+               infinite: bool = False) -> Array:
+        """``value`` as a float array of ``shape``, finite (``infinite``: or +inf, focus at
+        infinity), set as the field ``name``."""
         arr = np.asarray(value, dtype=float)
         if shape is not None and arr.shape != shape:
             msg = f"TakeData.{name} must have shape {shape}, got {arr.shape}"
             raise ValueError(msg)
-        if not np.all(np.isfinite(arr)):
+        if not np.all(np.isfinite(arr) | (infinite & np.isposinf(arr))):
             msg = f"TakeData.{name} has non-finite values"
             raise ValueError(msg)
         object.__setattr__(self, name, arr)

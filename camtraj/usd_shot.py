@@ -106,7 +106,7 @@ class Shot:
             convention; the rotation is orthonormal with determinant +1 (scale removed). The
             camera looks down its local -Z axis with local +Y up.
         focal_length_mm: (n,) focal length in [mm].
-        focus_distance_m: (n,) focus distance in [m]; 0 when unset.
+        focus_distance_m: (n,) focus distance in [m]; 0 when unset, inf at infinity.
         f_stop: (n,) f-number; 0 when unset (pinhole).
         meters_per_unit: The stage's ``metersPerUnit`` (scene unit length in [m]).
         up_axis: The stage's up axis, ``"Y"`` or ``"Z"``.
@@ -411,9 +411,13 @@ def _read(
         ("clippingRange", cam.GetClippingRangeAttr()),
     ):
         values = _sample_attribute(attr, time_codes, 2 if name == "clippingRange" else 0)
-        bad = ~np.isfinite(values.reshape(len(time_codes), -1)).all(axis=1)
+        usable = np.isfinite(values)
+        if name == "focusDistance":  # focus at infinity, as some exporters write it
+            usable |= np.isposinf(values)
+        bad = ~usable.reshape(len(time_codes), -1).all(axis=1)
         if bad.any():
-            msg = f"{path}: camera {cam_path} has no finite {name} {_where(frame_numbers, bad)}"
+            what = "finite or infinite" if name == "focusDistance" else "finite"
+            msg = f"{path}: camera {cam_path} has no {what} {name} {_where(frame_numbers, bad)}"
             raise ShotFileError(msg)
         lens[name] = values
 

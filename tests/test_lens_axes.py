@@ -347,6 +347,46 @@ def test_a_focus_and_stop_the_shot_leaves_unset_hold_at_home_and_say_so(tmp_path
     assert np.all(analysis.lens_q[:, 1:] == 0.0)  # both homes: the first rows' 0 deg
 
 
+def test_focus_at_infinity_reads_writes_and_drives_the_ring_to_its_infinity_mark(
+        tmp_path: Path) -> None:
+    """A focus distance of inf (how exporters write focus at infinity) is read as infinity,
+    written to /shot/frames as inf (decoded by mcap-ros2), and with the lens the focus
+    motor stands on the table's infinity row until the pull to 2 m starts."""
+    ms = make_samples()
+    frames = np.arange(FIRST, FIRST + 73, dtype=np.float64)
+    s = ms.ease(np.linspace(0.0, 1.0, frames.size))
+    pos = np.stack([6.5 - 1.0 * s, np.zeros_like(s), np.full_like(s, 1.4)], axis=1)
+    pan, tilt = ms.look_at(pos, SUBJECT)
+    move = ms.Move(frames, pos, pan, tilt, focal_mm=35.0, focus_m=2.0, f_stop=4.0)
+    shot = tmp_path / "infinity.usda"
+    shot.write_text(ms._header("camtraj test: focus from infinity", "Z", 1.0, frames, 24.0,
+                               "cam") + "\n"
+                    + ms._camera_prim_trs("cam", move, "Z", 1.0, "") + "\n", encoding="utf-8")
+    stage = Usd.Stage.Open(str(shot))
+    focus_attr = UsdGeom.Camera(stage.GetPrimAtPath("/cam")).GetFocusDistanceAttr()
+    focus_attr.Clear()
+    with np.errstate(divide="ignore"):  # 1/m eased from 0 (infinity) to 0.5 (2 m)
+        pull = 1.0 / (0.5 * ms.ease(np.linspace(0.0, 1.0, 37)))
+    want = np.concatenate([np.full(36, np.inf), pull])
+    for code, value in zip(frames.tolist(), want.tolist(), strict=True):
+        focus_attr.Set(value, code)
+    stage.GetRootLayer().Save()
+    plain, with_lens = tmp_path / "plain.mcap", tmp_path / "lens.mcap"
+    convert(shot, plain, ConvertOptions())
+    convert(shot, with_lens, ConvertOptions(lens=str(ZOOM)))
+    for out in (plain, with_lens):
+        with out.open("rb") as stream:
+            got = np.array([m.focus_distance_m for _s, _c, _m, m in make_reader(
+                stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                    topics=["/shot/frames"])])
+        assert np.all(np.isposinf(got[:37])), got[:38]
+        np.testing.assert_allclose(got[37:], want[37:], rtol=1e-6)  # USD keeps 32-bit floats
+    q = _at_frames(_decode(with_lens))
+    infinity_mark = 300.0  # deg: the zoom's table's [inf, 300.0] row
+    np.testing.assert_allclose(np.degrees(q[:37, 9]), infinity_mark, rtol=0, atol=1e-9)
+    assert np.degrees(q[-1, 9]) == pytest.approx(211.0, abs=1e-4)  # the table's [2.0, 211.0]
+
+
 def test_without_a_lens_nothing_changes(dolly: dict[str, Any]) -> None:
     """No --lens: the eight joints only, no lens metadata (byte identity with the code before
     issue 16 was checked by hand: see the branch's report)."""
