@@ -525,6 +525,7 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
         "message": str(exc),
         "timing": getattr(options, "timing", None),
         "max_speed": exc.max_speed,
+        "max_speed_set_by": getattr(exc, "set_by", "") or None,
         "feasible_fps": exc.feasible_fps,
         # The slow-down --timing scale takes (it was run); null when it fails too.
         "scale_factor": (exc.scale_factor if math.isfinite(exc.scale_factor) else None),
@@ -619,7 +620,8 @@ def _report(r: dict[str, Any]) -> str:
             advice = (f"; try --timing scale: the move {scale_fit(factor, fps)}"
                       if factor is not None and r["timing"] != "scale" else "")
             lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
-                         + advice)
+                         + (f", set by {r['max_speed_set_by']}" if r.get("max_speed_set_by")
+                            else "") + advice)
         return "\n".join(lines)
     fr = r["frames"]
     lines = [

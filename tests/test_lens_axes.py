@@ -242,7 +242,11 @@ def test_a_zoom_too_fast_fails_and_scale_fits_the_motor(dolly: dict[str, Any]) -
                   report)
     assert m is not None, report
     assert float(m.group(1)) / float(m.group(2)) == pytest.approx(2.0, rel=2e-2)
-    assert re.search(r"maximum feasible speed (49|50)% of real time", report), report
+    # the zoom's velocity, halved, is what sets the speed: the line says so
+    assert re.search(r"maximum feasible speed (49|50)% of real time \(could be shot at "
+                     r"[0-9.]+ fps\), set by zoom velocity; try --timing scale", report), report
+    checked = json.loads(run_cli("check", dolly["shot"], "--lens", slow, "--json").stdout)
+    assert checked["max_speed_set_by"] == "zoom velocity", checked
     assert "--timing scale" in report
     out = folder / "scaled.mcap"
     proc = run_cli("convert", dolly["shot"], "-o", out, "--lens", slow, "--timing", "scale",

@@ -182,6 +182,7 @@ class TimingLimitError(LimitError):
             nan when not known.
         room: Why the run-up or the run-out does not fit (one line; empty when they do or
             were not planned), said apart from the violations of the shot itself.
+        set_by: What sets ``max_speed`` (:attr:`TimingReport.set_by`; empty when not known).
     """
 
     def __init__(
@@ -193,6 +194,7 @@ class TimingLimitError(LimitError):
         feasible_fps: float = math.nan,
         scale_factor: float = math.nan,
         room: str = "",
+        set_by: str = "",
     ) -> None:
         super().__init__(message)
         self.violations = violations or []
@@ -200,6 +202,7 @@ class TimingLimitError(LimitError):
         self.feasible_fps = feasible_fps
         self.scale_factor = scale_factor
         self.room = room
+        self.set_by = set_by
 
 
 @dataclass(frozen=True, eq=False)

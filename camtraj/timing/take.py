@@ -265,7 +265,7 @@ def time_shot(
     if mode == "shot":
         problem = fit.problem(1.0) if need > 1.0 + LIMIT_RTOL else None
         if limiting or problem is not None:
-            raise _shot_mode_error(limiting, problem, max_speed, fps, scaled)
+            raise _shot_mode_error(limiting, problem, max_speed, fps, scaled, set_by=real.set_by())
         assert grid is not None
         shot, shot_x, speed_factor, ticks = grid.stream, grid.x, 1.0, ticks0
         del grid  # its samples before the frames are views of the stream
@@ -275,7 +275,8 @@ def time_shot(
         try:
             up, out = _build_edges(shot, limits, ends, start_q, 1.0 / shot_rate, frames)
         except TimingLimitError as exc:  # a grid effect at the margin: say what scale does
-            raise _shot_mode_error([], None, max_speed, fps, scaled, str(exc)) from None
+            raise _shot_mode_error([], None, max_speed, fps, scaled, str(exc),
+                                   set_by=real.set_by()) from None
     elif mode == "scale":
         speed_factor, ticks, shot, shot_x, up, out = scaled()
         shot_rate = ticks / (speed_factor * dt)
@@ -772,6 +773,7 @@ def _build_edges(shot: Samples, limits: Limits, edges: tuple[str, ...], start: A
 def _shot_mode_error(
     limiting: list[LimitViolation], problem: EdgeProblem | None, max_speed: float, fps: float,
     scaled: Callable[[], tuple[float, int, Samples, Array, Edge, Edge]], text: str = "",
+    set_by: str = "",
 ) -> TimingLimitError:
     """Why the shot's own timing does not fit, and what ``--timing scale`` does about it
     (it is run to find out: the advice is only given when scale succeeds, with the speed
@@ -791,7 +793,8 @@ def _shot_mode_error(
         parts.append(text)
     return TimingLimitError("; ".join([*parts, advice]), violations=limiting,
                             max_speed=max_speed, feasible_fps=fps * max_speed,
-                            scale_factor=factor, room=problem.text if problem else "")
+                            scale_factor=factor, room=problem.text if problem else "",
+                            set_by=set_by)
 
 
 def _uniform_length(take: tuple[float, int, Samples, Array, Edge, Edge], n: int,
