@@ -656,7 +656,7 @@ def summary(
             "camera_travel_m": travel[side],
             # whether the authored camera is at rest on that frame (--edges still keeps the
             # robot still there too)
-            "camera_at_rest": resting[side],
+            "camera_at_rest": bool(resting[side]),
             **({"from_start_pose": options.start_from is not None} if side == 0 else {}),
             "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.

@@ -440,16 +440,15 @@ def _end_motion(robot: Robot, take: ReadTake) -> tuple[Array, Array]:
 
 def test_still_edges_keep_the_robot_still_where_the_camera_rests(
         runs: dict[str, Run], robot: Robot) -> None:
-    """The crane-up eases from rest and to rest. With free ends (``--edges gentle``) the
-    solver already moves the redundant axes on the first frame, and the run-up swings the
-    camera around it; with ``--edges still`` (the default) every axis stands still on the
-    first and last frame (the central difference of the samples around them: a thousandth
-    of the velocity limit, where free
-    ends move some axis by a tenth of it), the camera moves under a millimetre before and
-    after them (free: over a centimetre before) and under a tenth as far as with free ends
-    when an optimal retime plays the ends faster (the run-up then builds a larger
-    acceleration), and the take is at most a tenth slower (measured: 0.94x). The summary's
-    camera travel is what FK of the decoded samples measures."""
+    """The crane-up eases from rest and to rest (settling: its acceleration fades too). With
+    free ends (``--edges gentle``) the solver already moves the redundant axes on the first
+    frame, and the run-up swings the camera around it; with ``--edges still`` (the default)
+    every axis stands still on the first and last frame (the central difference of the
+    samples around them: a thousandth of the velocity limit, where free ends move some axis
+    by a tenth of it) with no acceleration to build, so the camera does not move before or
+    after them (free: over a centimetre before), also when an optimal retime plays the ends
+    faster, and the take is at most 15% slower (measured: 0.90x). The summary's camera
+    travel is what FK of the decoded samples measures."""
     travel, speed = {}, {}
     for key in ("crane_gentle", "crane_still", "crane_still_optimal", "crane_optimal"):
         travel[key], speed[key] = _end_motion(robot, runs[key].take())
@@ -459,8 +458,9 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     for key in ("crane_still", "crane_still_optimal"):
         use = np.abs(speed[key]) / robot.max_velocity
         assert use.max() <= 1e-3, f"{key}: the ends move at {use.max():.2g} of a velocity limit"
-    assert travel["crane_still"].max() <= 1e-3
-    assert np.all(travel["crane_still_optimal"] <= 0.1 * travel["crane_optimal"])
+    for key in ("crane_still", "crane_still_optimal"):
+        assert travel[key].max() <= 1e-9, (key, travel[key])
+    assert travel["crane_optimal"].max() >= 1e-2
     assert (np.abs(speed["crane_gentle"]) / robot.max_velocity).max() >= 0.1
     assert travel["crane_gentle"][0] >= 1e-2
     still, free = runs["crane_still"].summary_json(), runs["crane_gentle"].summary_json()
@@ -470,7 +470,7 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     note = "but the robot's axes are already moving there, so the run-up/run-out swings the camera"
     assert note in runs["crane_gentle"].proc.stdout
     assert note not in runs["crane_still"].proc.stdout
-    assert 0.9 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
+    assert 0.85 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 
 # --------------------------------------------------------------------------------------------

@@ -502,3 +502,35 @@ def test_the_camera_is_at_rest_where_it_eases_from_or_to_rest() -> None:
     # 0.5 mm/s, constant: under the absolute bound, but that is the move's own pace
     assert camera_rests(shot(creep / 10, still), dt) == (False, False)
     assert camera_rests(shot(0.002 * ease, still), dt) == (True, True)  # a 2 mm eased nudge
+
+
+def test_a_camera_eased_so_its_acceleration_fades_has_settled() -> None:
+    """At rest, a camera eased so that its acceleration fades too (a quintic ease, as Maya's
+    and Blender's smooth curves give) has settled; one that starts or stops hard (a cubic
+    ease, whose acceleration is largest at its ends, or a constant acceleration) is only at
+    rest; one in motion is free (half a metre in 2 to 10 s at 24 fps)."""
+    from camtraj.ik.shot import camera_rests
+    from camtraj.timing.path import AT_REST, FREE, SETTLED
+
+    dt = 1.0 / 24.0
+    for n in (48, 96, 240):
+        u = np.linspace(0.0, 1.0, n)
+        quintic = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
+        cubic = 3 * u ** 2 - 2 * u ** 3
+
+        def truck(x: np.ndarray) -> np.ndarray:
+            T = np.tile(np.eye(4), (x.size, 1, 1))
+            T[:, :3, 3] = np.stack([x, np.full(x.size, 1.0), np.full(x.size, 1.4)], axis=1)
+            return T
+
+        assert camera_rests(truck(0.5 * quintic), dt) == (SETTLED, SETTLED), n
+        assert camera_rests(truck(0.5 * cubic), dt) == (AT_REST, AT_REST), n
+        assert camera_rests(truck(0.5 * u ** 2), dt) == (AT_REST, FREE), n
+        # a pan alone, eased both ways: the turn decides
+        pan = np.tile(np.eye(4), (n, 1, 1))
+        for k, a in enumerate(np.radians(60.0 * quintic)):
+            pan[k, :2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+        assert camera_rests(pan, dt) == (SETTLED, SETTLED), n
+        for k, a in enumerate(np.radians(60.0 * cubic)):
+            pan[k, :2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+        assert camera_rests(pan, dt) == (AT_REST, AT_REST), n

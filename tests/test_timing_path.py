@@ -315,6 +315,37 @@ def test_an_end_at_rest_reproduces_a_move_eased_from_rest(rest: tuple[bool, bool
             assert np.abs(path.at(np.array([0.0, 29.0]), 1)[1][end]).max() <= 1e-12
 
 
+def test_a_settled_end_is_clamped_still_and_reproduces_a_quintic_ease() -> None:
+    """Settled ends (velocity and acceleration zero) reproduce the quintic ease from rest to
+    rest (whose velocity and acceleration vanish at both ends) exactly; at rest (velocity
+    only) on the same frames the spline starts with an acceleration the ease does not have."""
+    from camtraj.timing.path import AT_REST, SETTLED
+
+    n = 48
+    u = np.arange(n) / (n - 1.0)
+    y = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
+    q = np.tile(y[:, None], (1, 8)) + HOME
+    big = np.full(8, 1e3)
+    settled = FramePath.fit(q, 1.0 / FPS, -big, big, None, np.full((2, 8), SETTLED))
+    at_rest = FramePath.fit(q, 1.0 / FPS, -big, big, None, np.full((2, 8), AT_REST))
+    x = np.linspace(0.0, n - 1.0, 10 * (n - 1) + 1)
+    s = x / (n - 1.0)
+    want = [10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5,
+            (30 * s ** 2 - 60 * s ** 3 + 30 * s ** 4) / (n - 1.0),
+            (60 * s - 180 * s ** 2 + 120 * s ** 3) / (n - 1.0) ** 2,
+            (60 - 360 * s + 360 * s ** 2) / (n - 1.0) ** 3]
+    got = settled.at(x, 3)
+    for k in range(4):
+        scale = np.abs(want[k]).max()
+        assert np.abs(got[k][:, 0] - (want[k] + (HOME[0] if k == 0 else 0.0))).max() \
+            <= 1e-9 * scale, k
+    ends = np.array([0.0, n - 1.0])
+    for d in (1, 2):
+        assert np.abs(settled.at(ends, 2)[d]).max() <= 1e-15
+    assert np.abs(at_rest.at(ends, 2)[1]).max() <= 1e-15
+    assert np.abs(at_rest.at(ends, 2)[2]).max() > 1e-3 * np.abs(want[2]).max()
+
+
 def _cubic_derivatives(y: Array) -> list[Array]:
     """The coefficients of the cubic through y (at 0, 1, ...) and of its first three
     derivatives."""

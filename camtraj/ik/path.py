@@ -27,6 +27,7 @@ from camtraj.ik.sm import check_joints, solve_ik
 from camtraj.ik.spline_ops import hold_runs
 from camtraj.robot import Robot
 from camtraj.timing import Limits, feasible_speed
+from camtraj.timing.path import FREE
 
 Array = NDArray[np.float64]
 
@@ -96,9 +97,10 @@ class PathSolution:
         objective: ``"shot"`` or ``"paper"``.
         start: The joint vector the robot starts from (8,) [m, rad]: home or ``start``.
         margins: The smallest distances to limits and singularities over the shot.
-        rest: Whether the path stands still on its first / last frame (``still_ends`` asked
-            and the camera at rest there, :func:`~camtraj.ik.shot.camera_rests`): whatever
-            times it gives those ends zero velocity (:meth:`rest_axes`).
+        rest: How the path rests on its first / last frame (``still_ends`` asked: the
+            camera's rest there, :func:`~camtraj.ik.shot.camera_rests`; else free): whatever
+            times it gives those ends zero velocity, and zero acceleration too where the
+            camera settles (:meth:`rest_axes`).
     """
 
     q: Array
@@ -107,22 +109,22 @@ class PathSolution:
     objective: str
     start: Array
     margins: PathMargins
-    rest: tuple[bool, bool] = (False, False)
+    rest: tuple[int, int] = (FREE, FREE)
 
-    def rest_axes(self, axes: int = 8) -> NDArray[np.bool_] | None:
+    def rest_axes(self, axes: int = 8) -> NDArray[np.int8] | None:
         """``time_shot``'s ``rest`` for this path and ``axes - 8`` lens axes after its
         joints (:func:`rest_mask`)."""
         return rest_mask(self.rest, axes)
 
 
-def rest_mask(rest: tuple[bool, bool], axes: int = 8) -> NDArray[np.bool_] | None:
-    """``time_shot``'s ``rest`` (2, axes) for a path at rest on its first / last frame as
-    ``rest`` says, with ``axes - 8`` lens axes after its joints: the joints at rest there,
-    the lens motors free (a focus pull may start while the camera stands still); None where
-    nothing rests."""
+def rest_mask(rest: tuple[int, int], axes: int = 8) -> NDArray[np.int8] | None:
+    """``time_shot``'s ``rest`` (2, axes) for a path resting on its first / last frame as
+    ``rest`` says (:data:`~camtraj.timing.path.FREE`, ``AT_REST``, ``SETTLED``), with
+    ``axes - 8`` lens axes after its joints: the joints rest there, the lens motors are free
+    (a focus pull may start while the camera stands still); None where nothing rests."""
     if not any(rest):
         return None
-    out = np.zeros((2, axes), dtype=bool)
+    out = np.zeros((2, axes), dtype=np.int8)
     out[:, :8] = np.array(rest)[:, None]
     return out
 
@@ -170,8 +172,9 @@ def solve_path_report(
         progress: Called with the number of frames just finished (for a progress bar).
         still_ends: Where the camera is at rest on the first or last frame (an eased start
             or stop, :func:`~camtraj.ik.shot.camera_rests`), the robot stands still there
-            too: the path is timed with zero velocity on that frame (:attr:`PathSolution.rest`)
-            and the shot objective solves for that timing. Default: free ends, where the
+            too: the path is timed with zero velocity on that frame, and zero acceleration
+            where the camera settles into it (:attr:`PathSolution.rest`), and the shot
+            objective solves for that timing. Default: free ends, where the
             redundant axes may already move on a frame the camera holds still (the faster
             take; its run-up moves the camera before the first frame).
 
@@ -198,7 +201,7 @@ def solve_path_report(
               f"{frame_interval!r}"
         raise ValueError(msg)
     dt = frame_interval or 1.0 / 24.0
-    rest = camera_rests(Ts, dt) if still_ends else (False, False)
+    rest = camera_rests(Ts, dt) if still_ends else (FREE, FREE)
     if obj == "shot":
         # scipy's own OpenBLAS (the refinement's banded solve) must be loaded before the limit
         # is set, or the limit does not reach it: two spinning BLAS threads per tiny solve
@@ -263,9 +266,9 @@ def _solve_sequence(robot: Robot, Ts: Array, first: Array, frames: NDArray[np.in
 def solve_shot(robot: Robot, targets: Array, start: Array, dt: float,
                frames: NDArray[np.int_],
                progress: Callable[[int], None] | None = None,
-               rest: tuple[bool, bool] = (False, False)) -> Array:
-    """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`), timed with zero
-    velocity on the first / last frame where ``rest`` says.
+               rest: tuple[int, int] = (FREE, FREE)) -> Array:
+    """The shot objective's joint path (n, 8) (see :mod:`camtraj.ik.shot`), timed resting on
+    the first / last frame as ``rest`` says (:meth:`~camtraj.timing.path.FramePath.fit`).
 
     The dynamic programme chooses by frame-to-frame differences, a proxy for the take's
     speed, so the refinement starts from several of its answers: on the robot file's

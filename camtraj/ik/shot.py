@@ -82,36 +82,68 @@ motion at its ends (held to rest there, its spline would start with a jerk the m
 has), an eased move's ends read 1e-4 of its pace and less."""
 
 
-def camera_rests(targets: Array, dt: float) -> tuple[bool, bool]:
-    """Whether the camera (or flange) is at rest on the first / last frame: the velocity of
-    the timing stage's spline through its poses there (:mod:`camtraj.timing.path`, free
-    ends: an eased move's zero slope is read from its frames) is below :data:`REST_SPEED`
-    and :data:`REST_TURN`, and below :data:`REST_SHARE` of the move's own pace. The robot is
-    at rest there too (the path's velocity is zero on that frame: no run-up or run-out
-    swings the camera around a still first or last frame)."""
-    from camtraj.timing.path import end_jerk
+SETTLE_SHARE = 0.1
+"""A camera end at rest has settled (eased in so that its acceleration fades too) where its
+acceleration is below this share of the move's largest between frames (in position and in
+turn). Eased moves' ends (the samples, the shot set's eased moves, a Maya-style quintic ease
+of 48 frames) read 0.004 to 0.04 of it; a camera that starts or stops hard (a truck from
+standstill, a cubic or cosine ease) reads about 1."""
+
+
+def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
+    """How the camera (or flange) rests on the first / last frame, as
+    :meth:`FramePath.fit <camtraj.timing.path.FramePath.fit>`'s levels.
+
+    At rest (``AT_REST``): the velocity of the timing stage's spline through its poses there
+    (:mod:`camtraj.timing.path`, free ends: an eased move's zero slope is read from its
+    frames) is below :data:`REST_SPEED` and :data:`REST_TURN`, and below :data:`REST_SHARE`
+    of the move's own pace. Settled (``SETTLED``): at rest and the spline's acceleration
+    there below :data:`SETTLE_SHARE` of the move's own (the camera eased in, not stopping
+    hard). The robot rests there the same way (zero velocity on that frame, and zero
+    acceleration where settled: no run-up or run-out swings the camera around a still first
+    or last frame); ``FREE`` otherwise."""
+    from camtraj.timing.path import AT_REST, FREE, SETTLED, end_jerk
     from camtraj.timing.quintic import solve_knot_derivatives
 
     n = targets.shape[0]
     if n < 3:
-        return False, False
+        return FREE, FREE
     coords = targets[:, :3, :].reshape(n, 12)  # rows of the pose: rotation and translation
     free = np.zeros(coords.shape, dtype=bool)
     zero = np.zeros(coords.shape)
-    v, _ = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
-    # the move's own pace: its largest step between frames, in position and in turn
-    steps = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1).max()
-    turns = np.linalg.norm(np.diff(targets[:, :3, :3], axis=0), axis=(1, 2)).max() / math.sqrt(2)
+    v, w = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
+    # the move's own pace and acceleration: its largest step and change of step between
+    # frames, in position and in turn
+    pos, rot = targets[:, :3, 3], targets[:, :3, :3]
+    pace = (_largest(np.diff(pos, axis=0)), _largest(np.diff(rot, axis=0)) / math.sqrt(2))
+    accel = (_largest(np.diff(pos, 2, axis=0)), _largest(np.diff(rot, 2, axis=0)) / math.sqrt(2))
     out = []
     for k in (0, n - 1):
-        pose = v[k].reshape(3, 4)  # d pose / d frame
-        turn = targets[k, :3, :3].T @ pose[:, :3]  # skew: the turning rate in camera axes
-        rate = 0.5 * math.hypot(turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
-                                turn[1, 0] - turn[0, 1])
-        speed = float(np.linalg.norm(pose[:, 3]))
-        out.append(speed <= min(REST_SPEED * dt, max(REST_SHARE * steps, ROUND_OFF))
-                   and rate <= min(REST_TURN * dt, max(REST_SHARE * turns, ROUND_OFF)))
+        speed, rate = _pose_rates(targets[k], v[k])  # per frame
+        dd = w[k].reshape(3, 4)  # d2 pose / d frame2, measured as the frames' changes are
+        acc, turn_acc = _largest(dd[None, :, 3]), _largest(dd[None, :, :3]) / math.sqrt(2)
+        rests = (speed <= min(REST_SPEED * dt, max(REST_SHARE * pace[0], ROUND_OFF))
+                 and rate <= min(REST_TURN * dt, max(REST_SHARE * pace[1], ROUND_OFF)))
+        settled = (acc <= max(SETTLE_SHARE * accel[0], ROUND_OFF)
+                   and turn_acc <= max(SETTLE_SHARE * accel[1], ROUND_OFF))
+        out.append(SETTLED if rests and settled else AT_REST if rests else FREE)
     return out[0], out[1]
+
+
+def _largest(d: Array) -> float:
+    """The largest norm over the first axis of ``d`` (k, ...), 0 for none."""
+    return float(np.sqrt((d.reshape(d.shape[0], -1) ** 2).sum(axis=1)).max()) if d.size else 0.0
+
+
+def _pose_rates(pose: Array, d: Array) -> tuple[float, float]:
+    """The speed and turning rate of a first derivative ``d`` (12,) of the pose rows (3, 4)
+    at ``pose`` (4, 4): its translation's norm and, from R^T dR (a skew matrix), the rate of
+    turn."""
+    dpose = d.reshape(3, 4)
+    turn = pose[:3, :3].T @ dpose[:, :3]
+    rate = 0.5 * math.hypot(turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
+                            turn[1, 0] - turn[0, 1])
+    return float(np.linalg.norm(dpose[:, 3])), rate
 
 
 @dataclass(frozen=True)

@@ -270,9 +270,9 @@ class ShotCost:
         holds: The frames (first, last) where the camera, and so the robot, holds still
             (:func:`~camtraj.ik.spline_ops.hold_runs`): the take's spline is clamped to rest
             next to them, as the timing stage fits it.
-        rests: Whether the camera is at rest on the first / last frame
+        rests: How the camera rests on the first / last frame
             (:func:`~camtraj.ik.shot.camera_rests`): the take's spline has zero velocity
-            there, as the timing stage fits it.
+            there (and zero acceleration where it settles), as the timing stage fits it.
     """
 
     lower: Array
@@ -294,7 +294,7 @@ class ShotCost:
     power: float = 8.0
     scale: float = 1.0
     holds: tuple[tuple[int, int], ...] = ()
-    rests: tuple[bool, bool] = (False, False)
+    rests: tuple[int, int] = (0, 0)
     room: bool = True
     edge_room: bool = False
 

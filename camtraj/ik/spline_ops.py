@@ -162,7 +162,7 @@ def hold_runs(held: NDArray[np.bool_]) -> tuple[tuple[int, int], ...]:
 
 @lru_cache(maxsize=4)  # per path length and holds: the solve's own, not kept for long
 def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
-               rests: tuple[bool, bool] = (False, False)) -> BandOps:
+               rests: tuple[int, int] = (0, 0)) -> BandOps:
     """The six operators (orders 1-3 at knots and at piece middles, in that order: velocity
     at knots, at middles, acceleration at knots, ...) for a path of n >= 3 frames, side by
     side (n rows; the middles' last row is empty).
@@ -170,9 +170,10 @@ def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
     ``holds`` (:func:`hold_runs`): where the camera holds, the robot holds (its frames are
     equal), and the timing stage fits each moving stretch between holds as its own spline,
     its knots next to a hold clamped to rest: each stretch gets its own operators, and the
-    rows of a hold are zero (a still robot uses no limit). ``rests``: whether the camera is at
-    rest on the first / last frame (:func:`~camtraj.ik.shot.camera_rests`): the spline's
-    velocity is zero there.
+    rows of a hold are zero (a still robot uses no limit). ``rests``: how the camera rests on
+    the first / last frame (:func:`~camtraj.ik.shot.camera_rests`, the levels of
+    :meth:`~camtraj.timing.path.FramePath.fit`): at rest, the spline's velocity is zero
+    there; settled, its velocity and acceleration, as next to a hold.
 
     A derivative of order d of the spline is zero on polynomials below degree d (the natural
     quintic spline reproduces them), so it is a weighted sum of the path's d-th differences;
@@ -183,7 +184,7 @@ def spline_ops(n: int, holds: tuple[tuple[int, int], ...] = (),
     width = 2 * k + 2
     orders = (1, 1, 2, 2, 3, 3)
     counts = (n, n - 1, n, n - 1, n, n - 1)
-    free = tuple("rest" if r else "free" for r in rests)
+    free = tuple(("free", "rest", "hold")[int(r)] for r in rests)
     if not holds:
         coef, inner = _stretch(n, (free[0], free[1]))
         return BandOps(orders, counts, coef, -k, inner)

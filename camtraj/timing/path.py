@@ -10,10 +10,13 @@ Frame ``i`` sits at the frame coordinate ``x = i``; piece ``i`` (between frames 
   the camera holds). There every axis is a straight line (exactly constant for equal
   solutions) and every moving stretch is its own spline, clamped to the hold's velocity and
   zero acceleration. One axis passing a turning point is no hold: it stays on the spline.
-* **An end at rest stays at rest.** Where the camera is at rest at the first or last frame
-  (an eased start or stop), the caller says so and the spline's velocity there is zero; its
-  acceleration stays free and its jerk is set as at a free end, so a move eased from rest
-  (any polynomial with zero slope at the end, up to a cubic) is reproduced exactly. The
+* **An end at rest stays at rest.** Where the camera is at rest at the first or last frame,
+  the caller says how (:data:`AT_REST`, :data:`SETTLED`). Stopping hard into it (at rest
+  but decelerating), the spline's velocity there is zero, its acceleration stays free and
+  its jerk is set as at a free end, so a move eased from rest (any polynomial with zero
+  slope at the end, up to a cubic) is reproduced exactly. Settled into it (eased so its
+  acceleration also fades), the end is clamped as next to a hold: velocity and acceleration
+  zero, so the run-up and run-out neither move nor accelerate the robot on that frame. The
   robot then stands still on that frame, however its redundant axes move after it.
 * **Free ends do not extrapolate.** At the first and last frame of the shot nothing is known
   beyond the frames. The spline's velocity and acceleration there follow from the frames
@@ -41,7 +44,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from camtraj.timing.quintic import (
     DEGREE,
@@ -56,6 +59,10 @@ BoolArray = NDArray[np.bool_]
 #: Two consecutive frame solutions whose every joint is closer than this [m or rad] are a hold
 #: (the robot still): the path is a straight line between them (constant when they are equal).
 HOLD_TOL = 1e-9
+#: How an end of the path rests (``FramePath.fit``'s ``rest``, per end and axis): free; at
+#: rest (velocity zero, the camera stopping hard into it); settled (velocity and acceleration
+#: zero, the camera eased into it).
+FREE, AT_REST, SETTLED = 0, 1, 2
 #: Frames of the least-squares cubic that gives the jerk at a free end.
 END_FRAMES = 6
 #: Rounds of clamp-and-refit at knots whose pieces could leave the position range; after
@@ -104,17 +111,19 @@ class FramePath:
 
     @classmethod
     def fit(cls, q: Array, dt: float, lower: Array, upper: Array,
-            hold: BoolArray | None = None, rest: BoolArray | None = None) -> FramePath:
+            hold: BoolArray | None = None, rest: ArrayLike | None = None) -> FramePath:
         """The path through frame solutions ``q`` (n, 8) inside ``[lower, upper]`` (8,).
 
         ``hold`` (n - 1,): the frame pairs where the camera holds still (default: every
         pair). A pair is a hold when it is one and every joint moves by at most
         :data:`HOLD_TOL` (the whole robot still); one axis passing a turning point is not.
-        ``rest`` (2, 8): per axis, whether the first / last frame is at rest (the camera is
-        at rest there, :func:`~camtraj.ik.shot.camera_rests`): the spline's velocity there
-        is zero (default: free ends).
+        ``rest`` (2, 8): per axis, how the first / last frame rests (the camera's rest there,
+        :func:`~camtraj.ik.shot.camera_rests`): :data:`FREE` (or False), :data:`AT_REST` (or
+        True): the spline's velocity there is zero; :data:`SETTLED`: its velocity and
+        acceleration are (default: free ends).
         """
         n, m = q.shape
+        level = np.zeros((2, m), dtype=np.int8) if rest is None else np.asarray(rest, np.int8)
         diff = np.diff(q, axis=0)
         robot_still = np.all(np.abs(diff) <= HOLD_TOL, axis=1)
         if hold is not None:
@@ -128,6 +137,10 @@ class FramePath:
         clamped[:-1] |= still
         v_given[1:] = np.where(still, diff, 0.0)
         v_given[:-1] = np.where(still, diff, v_given[:-1])
+        # a settled end is clamped as next to a hold: velocity and acceleration zero
+        clamped[[0, -1]] |= level >= SETTLED
+        v_given[[0, -1]] = np.where(level >= SETTLED, 0.0, v_given[[0, -1]])
+        rest = level >= AT_REST
         jerk = end_jerk(q, still)
         v, w = solve_knot_derivatives(q, clamped, v_given, w_given, jerk, rest=rest)
         # Each knot's room: the range, widened to the frame itself where a frame lies beyond

@@ -42,7 +42,7 @@ from camtraj.timing.limits import (
     violations_in,
 )
 from camtraj.timing.optimal import optimal
-from camtraj.timing.path import HOLD_TOL, FramePath, Samples, runs
+from camtraj.timing.path import FREE, HOLD_TOL, SETTLED, FramePath, Samples, runs
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -215,6 +215,9 @@ def time_shot(
             is a hold (the robot exactly still) where the camera holds and no joint moves
             by more than :data:`~camtraj.timing.path.HOLD_TOL`; default: wherever no joint
             moves.
+        rest: Per end and axis, shape (2, k), how the first / last frame rests
+            (:meth:`~camtraj.timing.path.FramePath.fit`: free, at rest or settled, or
+            booleans: at rest); default: free ends.
         edges: ``"gentle"`` run-up and run-out use per axis no more of the acceleration
             and jerk limits than the shot does (at least a quarter of them); ``"fast"``
             ones the full limits.
@@ -422,7 +425,7 @@ class _RealTime:
 
     @classmethod
     def of(cls, q: Array, dt: float, limits: Limits, rate: float, hold: BoolArray | None,
-           rest: BoolArray | None, edges: str, start: Array | None, frames: IntArray,
+           rest: NDArray[np.int8] | None, edges: str, start: Array | None, frames: IntArray,
            precision: float = FACTOR_RTOL, *,
            keep: bool = False) -> tuple[_RealTime, _Grid | None]:
         """The check, and with ``keep`` its servo grid (else dropped here)."""
@@ -624,14 +627,18 @@ def _validate_hold(hold: ArrayLike | None, n: int) -> BoolArray | None:
     return mask
 
 
-def _validate_rest(rest: ArrayLike | None, axes: int) -> BoolArray | None:
+def _validate_rest(rest: ArrayLike | None, axes: int) -> NDArray[np.int8] | None:
+    """``rest`` as levels (2, axes) (:data:`~camtraj.timing.path.FREE`, ``AT_REST``,
+    ``SETTLED``; booleans: free or at rest)."""
     if rest is None:
         return None
     mask = np.asarray(rest)
-    if mask.shape != (2, axes) or mask.dtype != np.bool_:
-        msg = f"rest must be 2 x {axes} booleans (per end and axis), got {mask.shape} {mask.dtype}"
+    if (mask.shape != (2, axes) or mask.dtype.kind not in "biu"
+            or not np.all((mask >= FREE) & (mask <= SETTLED))):
+        msg = (f"rest must be 2 x {axes} rest levels 0-2 or booleans (per end and axis), got "
+               f"{mask.shape} {mask.dtype}")
         raise ValueError(msg)
-    return mask
+    return mask.astype(np.int8)
 
 
 def _validate_start(start: ArrayLike, axes: int) -> Array:
