@@ -12,7 +12,7 @@ Outputs, for a shot ``path/to/NAME.usda``:
   (``convert_options``).
 - ``OUTDIR/NAME.rig.usda`` with ``--usd``: the USD rig layer (``camtraj convert --usd``).
 - ``OUTDIR/batch_report.json``: one entry per shot (status ``ok``, ``failed`` or ``skipped``,
-  reason, frames, max speed, time), and the batch's exit code.
+  reason, frames, max speed, the run's warnings, time), and the batch's exit code.
 
 A shot whose MCAP and summary are both at least as new as the shot file, the robot file and the
 set file, and whose summary records the same convert options, is skipped (make-style) unless
@@ -224,6 +224,7 @@ class ShotResult:
             "error": self.error,
             "frames": self.summary.get("frames"),
             "max_speed": self.summary.get("max_speed"),
+            "warnings": list(self.summary.get("warnings", [])),
             "duration": self.summary.get("duration"),
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
@@ -401,7 +402,12 @@ def _convert_one(
             "error": "Interrupted",
         }
     else:
-        outcome = {"status": "ok", "summary": summary, "warnings": held.texts}
+        # what the shot's reader logged, then the run's own warnings (the summary's, which
+        # convert prints with its report), each once, naming the shot
+        said = held.texts + [w for w in summary.get("warnings", []) if w not in held.texts]
+        outcome = {"status": "ok", "summary": summary,
+                   "warnings": [w if w.startswith(f"{shot}: ") else f"{shot}: {w}"
+                                for w in said]}
     finally:
         interrupts.ignore()
         logging.getLogger().removeHandler(held)

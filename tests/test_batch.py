@@ -293,6 +293,31 @@ def test_a_shots_warnings_are_said_only_when_it_converts(tmp_path: Path) -> None
     assert f"ERROR: {shots[1]}: no camera" in proc.stderr
 
 
+def test_a_converted_shots_run_warnings_are_said_and_reported(tmp_path: Path) -> None:
+    """A shot that converts with warnings of its own run (not only its reader's: a focal
+    length in millimetres where USD wants tenths of a scene unit reads as 3500 mm) says them
+    on stderr, naming the shot, and lists them in batch_report.json, as its summary does
+    (the batch said nothing and its report had no warnings)."""
+    from pxr import Usd, UsdGeom
+
+    from camtraj.robot import Robot
+    from tests.shots import base_move, write_shot
+
+    shot = write_shot(tmp_path / "mm_lens.usda", base_move(Robot.default()))
+    stage = Usd.Stage.Open(str(shot))
+    UsdGeom.Camera(stage.GetPrimAtPath("/World/cam")).GetFocalLengthAttr().Set(35.0)
+    stage.GetRootLayer().Save()
+    proc = _run("batch", str(shot), "-o", str(tmp_path / "out"), "-q")
+    assert proc.returncode == 0, proc.stderr
+    said = [line for line in proc.stderr.splitlines() if "focalLength" in line]
+    assert len(said) == 1 and said[0].startswith(f"{shot}: camera /World/cam focalLength 35 "
+                                                 "reads as 3500 mm"), proc.stderr
+    report = json.loads((tmp_path / "out" / REPORT_NAME).read_text())
+    (entry,) = report["shots"]
+    summary = json.loads((tmp_path / "out" / "mm_lens.summary.json").read_text())
+    assert entry["warnings"] == summary["warnings"] and len(entry["warnings"]) == 1
+
+
 def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) -> None:
     """Run where a folder named camtraj sits (a clone of this repository, an output folder):
     the workers import the installed package, not that folder (every worker failed, and the
