@@ -731,7 +731,7 @@ def with_effort(robot: Robot, k: float) -> Robot:
 
 
 def max_speed(robot: Robot, q: Array, fps: float, targets: Array,
-              rest: NDArray[np.bool_] | None = None) -> float:
+              rest: NDArray[np.int8] | None = None) -> float:
     """The timing stage's maximum feasible speed of the joint path ``q`` (n, 8) at ``fps``, as
     a fraction of real time (``inf``: nothing moves), timed as ``convert`` times it: still
     where the camera ``targets`` (n, 4, 4) hold, and at rest on the end frames ``rest``
@@ -766,7 +766,7 @@ class Speeds:
     q_default: Array
     q_paper: Array
     q_effort: Array
-    rest: NDArray[np.bool_] | None = None
+    rest: NDArray[np.int8] | None = None
 
 
 def gentle_speed(robot: Robot, shot: SetShot) -> float:

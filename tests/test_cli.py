@@ -258,7 +258,8 @@ def test_check_json_feasible_shot_has_the_numbers(cli: CliRuns) -> None:
         for quantity in ("position", "velocity", "acceleration", "jerk"):
             assert isinstance(use[quantity], float), (name, quantity)
             assert 0.0 <= use[quantity] <= 1.0 + 1e-9, (name, quantity, use[quantity])
-    assert rep["duration"] > rep["shot_end"] - rep["shot_start"] >= 119 / 24 - 1e-9
+    # a settled push-in needs no run-up or run-out: the take may be the shot alone
+    assert rep["duration"] >= rep["shot_end"] - rep["shot_start"] >= 119 / 24 - 1e-9
     _assert_wrote_nothing(cli, "check_ok_json")
 
 

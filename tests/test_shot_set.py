@@ -168,8 +168,8 @@ def test_the_objectives_model_of_the_speed_is_the_timing_stages_on_every_shot(
         held = camera_holds(shot.targets)
         cost = dataclasses.replace(ShotCost.for_robot(robot, 1.0 / shot.fps),
                                    holds=hold_runs(held),
-                                   rests=(False, False) if s.rest is None
-                                   else (bool(s.rest[0, 0]), bool(s.rest[1, 0])))
+                                   rests=(0, 0) if s.rest is None
+                                   else (int(s.rest[0, 0]), int(s.rest[1, 0])))
         model = 1.0 / cost.peak(s.q_default)
         if abs(model / s.default - 1.0) > MODEL_RTOL:
             failures.append(f"{shot.name}: model {model:.3f} x real time, take "
