@@ -189,23 +189,32 @@ def test_whole_powers_equal_pow() -> None:
 
 
 @pytest.mark.parametrize(("n", "rests", "held_pairs"), [
-    (40, (True, False), []),
-    (150, (False, True), []),
-    (400, (True, True), []),
-    (200, (True, True), [(90, 100)]),  # at rest at both ends, a hold between
-    (120, (True, False), [(100, 119)]),  # at rest at the start, holding to the end
+    (40, (1, 0), []),
+    (150, (0, 1), []),
+    (400, (1, 1), []),
+    (200, (1, 1), [(90, 100)]),  # at rest at both ends, a hold between
+    (120, (1, 0), [(100, 119)]),  # at rest at the start, holding to the end
+    (40, (2, 0), []),  # settled (velocity and acceleration zero)
+    (150, (0, 2), []),
+    (60, (1, 2), []),
+    (200, (2, 2), [(90, 100)]),
 ])
 def test_operators_with_ends_at_rest_give_the_timing_stages_spline(
-        robot: Robot, n: int, rests: tuple[bool, bool],
+        robot: Robot, n: int, rests: tuple[int, int],
         held_pairs: list[tuple[int, int]]) -> None:
     """Where the camera is at rest on the first or last frame (``--edges still``), the timing
-    stage fits the spline with zero velocity there: the operators give that spline too, and
-    its velocity at such an end is zero. The path eases from and to rest at those ends, as
-    the camera does there (a path that runs into a rest end at speed makes a transient wider
-    than the band)."""
+    stage fits the spline with zero velocity there (1), and zero acceleration too where the
+    camera settles (2): the operators give that spline too, and its velocity (and
+    acceleration where settled) at such an end is zero. The path eases from and to rest at
+    those ends as the camera does there (a cosine ease: at rest; a cubic or quintic one:
+    settled; a path that runs into a rest end at speed makes a transient wider than the
+    band)."""
     k = np.arange(n) / (n - 1)
-    ease = {(True, False): 1 - np.cos(0.5 * np.pi * k), (False, True): np.sin(0.5 * np.pi * k),
-            (True, True): 0.5 - 0.5 * np.cos(np.pi * k)}[rests]
+    start, end = rests
+    ease = ({1: 1 - np.cos(0.5 * np.pi * k), 2: k ** 3}[start] if not end
+            else {1: np.sin(0.5 * np.pi * k), 2: 1 - (1 - k) ** 3}[end] if not start
+            else 10 * k ** 3 - 15 * k ** 4 + 6 * k ** 5 if 2 in rests
+            else 0.5 - 0.5 * np.cos(np.pi * k))
     q = smooth_path(robot, n, n + 7, ease)
     held = np.zeros(n - 1, dtype=bool)
     for a, b in held_pairs:
@@ -215,12 +224,14 @@ def test_operators_with_ends_at_rest_give_the_timing_stages_spline(
     rest = np.repeat(np.array(rests)[:, None], 8, axis=1)
     path = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, held, rest)
     free = FramePath.fit(q, 1.0 / 24.0, limits.lower, limits.upper, held)
-    for end, at_rest in zip((0.0, n - 1.0), rests, strict=True):
-        v_rest = path.at(np.array([end]), 1)[1]
-        v_free = free.at(np.array([end]), 1)[1]
-        if at_rest:
-            assert np.abs(v_rest).max() <= 1e-12
+    for x_end, level in zip((0.0, n - 1.0), rests, strict=True):
+        v_rest = path.at(np.array([x_end]), 2)
+        v_free = free.at(np.array([x_end]), 1)[1]
+        if level:
+            assert np.abs(v_rest[1]).max() <= 1e-12
             assert np.abs(v_free).max() > 0.0  # the smooth path itself moves there
+        if level == 2:
+            assert np.abs(v_rest[2]).max() <= 1e-12
     knots = np.arange(n, dtype=float)
     mids = np.arange(n - 1) + 0.5
     runs = hold_runs(held)
@@ -235,17 +246,16 @@ def test_operators_with_ends_at_rest_give_the_timing_stages_spline(
         got = values[:rows, :, i]
         scale = np.abs(want).max(axis=0)
         assert np.all(np.abs(got - want) <= 0.03 * scale + 1e-12), (order, n, rests)
-    # at a rest end the velocity row reads zero on any path (the free operators read the
-    # path's own motion there)
+    # at a rest end the velocity row reads zero on any path, and where settled the
+    # acceleration row too (the free operators read the path's own motion there)
     moving = smooth_path(robot, n, n + 7)
-    ends = [0 if rests[0] else None, n - 1 if rests[1] else None]
     for ops_i, label in ((spline_ops(n, runs, rests), "rest"), (spline_ops(n, runs), "free")):
         values = ops_i.apply(moving)
         for i, (order, rows) in enumerate(zip(ops_i.orders, ops_i.rows, strict=True)):
-            if order != 1 or rows != n:
-                continue
-            for e in ends:
-                if e is None or (label == "free" and any(a <= e <= b for a, b in runs)):
+            for e, level in zip((0, n - 1), rests, strict=True):
+                if rows != n or order > level:
+                    continue
+                if label == "free" and any(a <= e <= b for a, b in runs):
                     continue
                 size = float(np.abs(values[e, :, i]).max())
                 assert (size <= 1e-12) == (label == "rest"), (label, order, e, size)
