@@ -80,28 +80,44 @@ REST_SHARE = 0.02
 move's largest step between frames: a creep at a constant half a millimetre a second is in
 motion at its ends (held to rest there, its spline would start with a jerk the move never
 has), an eased move's ends read 1e-4 of its pace and less."""
-
-
 SETTLE_SHARE = 0.1
 """A camera end at rest has settled (eased in so that its acceleration fades too) where its
 acceleration is below this share of the move's largest between frames (in position and in
 turn). Eased moves' ends (the samples, the shot set's eased moves, a Maya-style quintic ease
 of 48 frames) read 0.004 to 0.04 of it; a camera that starts or stops hard (a truck from
 standstill, a cubic or cosine ease) reads about 1."""
+SETTLE_ACCEL = 1e-2
+"""[m/s^2] An end accelerating less than this (and turning less than :data:`SETTLE_TURN`)
+has settled whatever the move's own acceleration: a run-up building it moves the camera by
+well under a micrometre (and the shot's own round-off, float matrices in the file, is
+larger than the share of a slow move's acceleration)."""
+SETTLE_TURN = math.radians(0.5)
+"""[rad/s^2] The turning acceleration below which an end has settled (:data:`SETTLE_ACCEL`)."""
+END_FIT = (10, 5)
+"""Frames and degree of the least-squares polynomial through an end frame that is the second
+estimate of the camera's velocity and acceleration there (:func:`camera_rests`). The timing
+stage's free-ended spline through the whole move is exact for moves up to a cubic (a whip
+that starts as t^3 over 12 frames); this one for any ease that is a quintic (in position and
+in angle) over its last ten frames, however short the move: the spline alone read a 1 s
+quintic push-in of 30 cm at 24 fps as moving at 3 mm/s, and the run-up then swung the camera
+4.9 cm before the first frame."""
 
 
 def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
     """How the camera (or flange) rests on the first / last frame, as
     :meth:`FramePath.fit <camtraj.timing.path.FramePath.fit>`'s levels.
 
-    At rest (``AT_REST``): the velocity of the timing stage's spline through its poses there
-    (:mod:`camtraj.timing.path`, free ends: an eased move's zero slope is read from its
-    frames) is below :data:`REST_SPEED` and :data:`REST_TURN`, and below :data:`REST_SHARE`
-    of the move's own pace. Settled (``SETTLED``): at rest and the spline's acceleration
-    there below :data:`SETTLE_SHARE` of the move's own (the camera eased in, not stopping
-    hard). The robot rests there the same way (zero velocity on that frame, and zero
-    acceleration where settled: no run-up or run-out swings the camera around a still first
-    or last frame); ``FREE`` otherwise."""
+    The camera's velocity and acceleration at an end frame are estimated twice: by the
+    timing stage's spline through every frame (:mod:`camtraj.timing.path`, free ends) on the
+    rows of the pose (rotation and translation), and by the least-squares polynomial through
+    the end frame and the frames next to it (:data:`END_FIT`) on its position and rotation
+    vector; the end rests as the more restful of the two says. At rest (``AT_REST``): the
+    velocity is below :data:`REST_SPEED` and :data:`REST_TURN`, and below :data:`REST_SHARE`
+    of the move's own pace. Settled (``SETTLED``): at rest and the acceleration below
+    :data:`SETTLE_SHARE` of the move's own, or below :data:`SETTLE_ACCEL` and
+    :data:`SETTLE_TURN` (the camera eased in, not stopping hard). The robot rests there the
+    same way (zero velocity on that frame, and zero acceleration where settled: no run-up or
+    run-out swings the camera around a still first or last frame); ``FREE`` otherwise."""
     from camtraj.timing.path import AT_REST, FREE, SETTLED, end_jerk
     from camtraj.timing.quintic import solve_knot_derivatives
 
@@ -112,22 +128,54 @@ def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
     free = np.zeros(coords.shape, dtype=bool)
     zero = np.zeros(coords.shape)
     v, w = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
+    # per end: (speed, turning rate, acceleration, turning acceleration), per frame
+    spline = []
+    for k in (0, n - 1):
+        dd = w[k].reshape(3, 4)  # d2 pose / d frame2, measured as the frames' changes are
+        spline.append((*_pose_rates(targets[k], v[k]), _largest(dd[None, :, 3]),
+                       _largest(dd[None, :, :3]) / math.sqrt(2)))
     # the move's own pace and acceleration: its largest step and change of step between
     # frames, in position and in turn
     pos, rot = targets[:, :3, 3], targets[:, :3, :3]
     pace = (_largest(np.diff(pos, axis=0)), _largest(np.diff(rot, axis=0)) / math.sqrt(2))
     accel = (_largest(np.diff(pos, 2, axis=0)), _largest(np.diff(rot, 2, axis=0)) / math.sqrt(2))
+    slow = (min(REST_SPEED * dt, max(REST_SHARE * pace[0], ROUND_OFF)),
+            min(REST_TURN * dt, max(REST_SHARE * pace[1], ROUND_OFF)))
+    calm = (max(SETTLE_SHARE * accel[0], SETTLE_ACCEL * dt * dt, ROUND_OFF),
+            max(SETTLE_SHARE * accel[1], SETTLE_TURN * dt * dt, ROUND_OFF))
     out = []
-    for k in (0, n - 1):
-        speed, rate = _pose_rates(targets[k], v[k])  # per frame
-        dd = w[k].reshape(3, 4)  # d2 pose / d frame2, measured as the frames' changes are
-        acc, turn_acc = _largest(dd[None, :, 3]), _largest(dd[None, :, :3]) / math.sqrt(2)
-        rests = (speed <= min(REST_SPEED * dt, max(REST_SHARE * pace[0], ROUND_OFF))
-                 and rate <= min(REST_TURN * dt, max(REST_SHARE * pace[1], ROUND_OFF)))
-        settled = (acc <= max(SETTLE_SHARE * accel[0], ROUND_OFF)
-                   and turn_acc <= max(SETTLE_SHARE * accel[1], ROUND_OFF))
-        out.append(SETTLED if rests and settled else AT_REST if rests else FREE)
+    for side, local in enumerate(_end_rates(targets)):
+        level = FREE
+        for speed, rate, acc, turn_acc in (spline[side], local):
+            if speed <= slow[0] and rate <= slow[1]:
+                level = max(level, SETTLED if acc <= calm[0] and turn_acc <= calm[1]
+                            else AT_REST)
+        out.append(level)
     return out[0], out[1]
+
+
+def _end_rates(targets: Array) -> list[tuple[float, float, float, float]]:
+    """Speed, turning rate, acceleration and turning acceleration (per frame, per frame^2) of
+    poses (n, 4, 4), n >= 3, at the first and the last frame: those of the least-squares
+    polynomial of :data:`END_FIT` through the end frame (fewer frames and a lower degree for
+    a short shot) fitted to the positions and the rotation vectors from the end frame's
+    orientation of the frames next to it."""
+    from scipy.spatial.transform import Rotation
+
+    frames, degree = END_FIT
+    k = min(targets.shape[0], frames)
+    degree = min(degree, k - 2)
+    t = np.arange(1, k, dtype=float)
+    basis = np.stack([t ** p for p in range(1, degree + 1)], axis=1)
+    out = []
+    for poses in (targets[:k], targets[::-1][:k]):
+        turn = Rotation.from_matrix(poses[0, :3, :3].T @ poses[1:, :3, :3]).as_rotvec()
+        rows = np.concatenate([poses[1:, :3, 3] - poses[0, :3, 3], turn], axis=1)
+        c = np.linalg.lstsq(basis, rows, rcond=None)[0]
+        acc = 2.0 * c[1] if degree > 1 else np.zeros(6)
+        out.append((float(np.linalg.norm(c[0, :3])), float(np.linalg.norm(c[0, 3:])),
+                    float(np.linalg.norm(acc[:3])), float(np.linalg.norm(acc[3:]))))
+    return out
 
 
 def _largest(d: Array) -> float:
