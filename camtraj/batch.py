@@ -196,6 +196,9 @@ class ShotResult:
         seconds: Conversion wall time in [s] (0 when skipped).
         cpu_seconds: CPU time of the conversion in [s] (0 when skipped).
         summary: The convert summary (read back from the summary file when skipped).
+        warnings: What the shot's conversion warned, each naming the shot (said on stderr
+            when it converts now; a skipped shot's are its summary's, from the run that
+            made it).
         earlier_output: For a failed shot, its MCAP path when a file is there from an
             earlier run (the batch removes nothing), else None.
     """
@@ -210,6 +213,7 @@ class ShotResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
     earlier_output: str | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -224,7 +228,7 @@ class ShotResult:
             "error": self.error,
             "frames": self.summary.get("frames"),
             "max_speed": self.summary.get("max_speed"),
-            "warnings": list(self.summary.get("warnings", [])),
+            "warnings": list(self.warnings),
             "duration": self.summary.get("duration"),
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
@@ -403,11 +407,11 @@ def _convert_one(
         }
     else:
         # what the shot's reader logged, then the run's own warnings (the summary's, which
-        # convert prints with its report), each once, naming the shot
-        said = held.texts + [w for w in summary.get("warnings", []) if w not in held.texts]
-        outcome = {"status": "ok", "summary": summary,
-                   "warnings": [w if w.startswith(f"{shot}: ") else f"{shot}: {w}"
-                                for w in said]}
+        # convert prints with its report), each once, naming the shot as the reader does
+        named = str(Path(shot))
+        said = [w if w.startswith(f"{named}: ") else f"{named}: {w}"
+                for w in [*held.texts, *summary.get("warnings", [])]]
+        outcome = {"status": "ok", "summary": summary, "warnings": list(dict.fromkeys(said))}
     finally:
         interrupts.ignore()
         logging.getLogger().removeHandler(held)
@@ -533,6 +537,7 @@ def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any
         seconds=outcome["seconds"],
         cpu_seconds=outcome.get("cpu_seconds", 0.0),
         summary=outcome.get("summary", {}),
+        warnings=tuple(outcome.get("warnings", ())),
     )
 
 
@@ -630,6 +635,7 @@ def run_batch(
                     status="skipped",
                     reason="up to date",
                     summary=previous,
+                    warnings=tuple(f"{Path(shot)}: {w}" for w in previous.get("warnings", [])),
                 )
                 continue
         todo.append(i)
@@ -671,9 +677,8 @@ def run_batch(
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
-                    if result.status == "ok":  # a converted shot's warnings, as convert's
-                        for text in future.result().get("warnings", ()):
-                            bar.write(text, file=sys.stderr)
+                    for text in result.warnings:  # a converted shot's, as convert's
+                        bar.write(text, file=sys.stderr)
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)
             except KeyboardInterrupt as exc:

@@ -525,7 +525,7 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
         "message": str(exc),
         "timing": getattr(options, "timing", None),
         "max_speed": exc.max_speed,
-        "max_speed_set_by": getattr(exc, "set_by", "") or None,
+        "max_speed_set_by": getattr(exc, "set_by", ""),  # as a feasible run's summary
         "feasible_fps": exc.feasible_fps,
         # The slow-down --timing scale takes (it was run); null when it fails too.
         "scale_factor": (exc.scale_factor if math.isfinite(exc.scale_factor) else None),

@@ -40,7 +40,7 @@ from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
 from camtraj.shown import frame_runs, frame_span
 from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
-from camtraj.timing.path import runs
+from camtraj.timing.path import REST_NAMES, runs
 from camtraj.usd_shot import Shot, read_shot
 
 Array = NDArray[np.float64]
@@ -657,6 +657,9 @@ def summary(
             # whether the authored camera is at rest on that frame (--edges still keeps the
             # robot still there too)
             "camera_at_rest": bool(resting[side]),
+            # how: "at_rest" (stopping hard into it) or "settled" (eased in: the robot does
+            # not even accelerate there), else "free"
+            "camera_rest": REST_NAMES[resting[side]],
             **({"from_start_pose": options.start_from is not None} if side == 0 else {}),
             "extent": {k: axis_value(k, v) for k, v in part.get("extent", {}).items()},
             # Its own peak use of the limits (fractions), apart from the shot's peak_use.

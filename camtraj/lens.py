@@ -366,9 +366,9 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
                 f"{lens.focal_length_mm:g} mm")
     for axis, what, unit in (("focus", "focus distance", " m"), ("iris", "f-stop", "")):
         x = shot_quantity(shot, axis)
-        if lens.axis(axis) is None and float(np.ptp(x)) > 0.0:
-            span = (f"{float(x.min()):.4g}{unit} to {float(x.max()):.4g}{unit}" if unit else
-                    f"f/{float(x.min()):.4g} to f/{float(x.max()):.4g}")
+        if lens.axis(axis) is None and float(x.max()) > float(x.min()):  # inf: focus at infinity
+            span = (f"{_show(axis, float(x.min()))} to {_show(axis, float(x.max()))}" if unit
+                    else f"f/{float(x.min()):.4g} to f/{float(x.max()):.4g}")
             out.append(
                 f"the shot animates its {what} ({span}) "
                 f"but the lens {lens.name} has no {axis} calibration: the {axis} is not "

@@ -50,7 +50,8 @@ class ConvertOptions:
             the set file's ``[collision] clearance_m``.
         edges: How the run-up and run-out move: ``"still"`` (the default: where the camera
             is at rest on the first or last frame, an eased start or stop, the robot stands
-            still there too, its velocity zero on that frame, and the solver plans for it;
+            still there too, its velocity zero on that frame, and its acceleration too where
+            the camera settles into it, and the solver plans for it;
             elsewhere as gentle), ``"gentle"`` (per axis no more of the acceleration and
             jerk limits than the shot uses, at least a quarter of them; the robot may move
             on a still end frame, for a take a few percent faster) or ``"fast"`` (the full
@@ -103,7 +104,8 @@ class ConvertOptions:
     @property
     def timing_edges(self) -> str:
         """The run-up and run-out the timing stage builds: ``"still"`` ends are gentle ones
-        (what keeps them still is the path's zero velocity where the camera rests)."""
+        (what keeps them still is the path's zero velocity where the camera rests, and zero
+        acceleration where it settles)."""
         return "gentle" if self.edges == "still" else self.edges
 
 
@@ -254,7 +256,8 @@ def more_convert_options(func: F) -> F:
             default="still",
             show_default=True,
             help="Run-up and run-out: still = where the camera is at rest on the first or last "
-            "frame the robot stands still there too, elsewhere as gentle; gentle = per axis no "
+            "frame the robot stands still there too (not even accelerating where the camera "
+            "settles), elsewhere as gentle; gentle = per axis no "
             "more acceleration and jerk than the shot uses (at least 25% of the limits), the "
             "robot free to move on a still end frame (a few percent faster); fast = the full "
             "limits (shortest).",

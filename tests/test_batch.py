@@ -290,6 +290,9 @@ def test_a_shots_warnings_are_said_only_when_it_converts(tmp_path: Path) -> None
     said = [line for line in proc.stderr.splitlines() if "metersPerUnit" in line]
     assert said == [f"{shots[0]}: metersPerUnit is not authored; using USD's fallback 0.01 "
                     "(centimetres)"], proc.stderr
+    # the report keeps what stderr said: the reader's logged warning too
+    report = json.loads((tmp_path / "out" / REPORT_NAME).read_text())
+    assert report["shots"][0]["warnings"] == said and report["shots"][1]["warnings"] == []
     assert f"ERROR: {shots[1]}: no camera" in proc.stderr
 
 
@@ -315,7 +318,8 @@ def test_a_converted_shots_run_warnings_are_said_and_reported(tmp_path: Path) ->
     report = json.loads((tmp_path / "out" / REPORT_NAME).read_text())
     (entry,) = report["shots"]
     summary = json.loads((tmp_path / "out" / "mm_lens.summary.json").read_text())
-    assert entry["warnings"] == summary["warnings"] and len(entry["warnings"]) == 1
+    assert len(summary["warnings"]) == 1
+    assert entry["warnings"] == [f"{shot}: {summary['warnings'][0]}"] == said
 
 
 def test_workers_start_from_a_folder_holding_a_camtraj_folder(tmp_path: Path) -> None:

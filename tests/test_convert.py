@@ -467,6 +467,7 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     assert runs["blender_crane_up"].summary_json()["edges"] == "still"  # the default
     assert still["edges"] == "still" and free["edges"] == "gentle"
     assert still["runup"]["camera_at_rest"] and free["runout"]["camera_at_rest"]
+    assert still["runup"]["camera_rest"] == still["runout"]["camera_rest"] == "settled"
     note = "but the robot's axes are already moving there, so the run-up/run-out swings the camera"
     assert note in runs["crane_gentle"].proc.stdout
     assert note not in runs["crane_still"].proc.stdout

@@ -15,6 +15,7 @@ import html
 import json
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -389,6 +390,15 @@ def test_focus_at_infinity_reads_writes_and_drives_the_ring_to_its_infinity_mark
     infinity_mark = 300.0  # deg: the zoom's table's [inf, 300.0] row
     np.testing.assert_allclose(np.degrees(q[:37, 9]), infinity_mark, rtol=0, atol=1e-9)
     assert np.degrees(q[-1, 9]) == pytest.approx(211.0, abs=1e-4)  # the table's [2.0, 211.0]
+    # a lens without focus calibration says what the shot's focus does, infinity by name
+    zoom_only = tmp_path / "zoom_only.toml"
+    zoom_only.write_text(ZOOM_TEXT.split("[focus]", 1)[0] + "[controller.zoom]"
+                         + ZOOM_TEXT.split("[controller.zoom]", 1)[1], encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy warning on the infinite span
+        result = convert(shot, None, ConvertOptions(lens=str(zoom_only)))
+    assert any("focus distance (2 m to infinity)" in w for w in result["warnings"]), \
+        result["warnings"]
 
 
 def test_without_a_lens_nothing_changes(dolly: dict[str, Any]) -> None:

@@ -63,6 +63,8 @@ HOLD_TOL = 1e-9
 #: rest (velocity zero, the camera stopping hard into it); settled (velocity and acceleration
 #: zero, the camera eased into it).
 FREE, AT_REST, SETTLED = 0, 1, 2
+#: The levels' names, as the summary gives them.
+REST_NAMES = ("free", "at_rest", "settled")
 #: Frames of the least-squares cubic that gives the jerk at a free end.
 END_FRAMES = 6
 #: Rounds of clamp-and-refit at knots whose pieces could leave the position range; after
