@@ -734,8 +734,11 @@ def tf_times(take: TakeData) -> Array:
     """
     start, end = float(take.t[0]), float(take.t[-1])
     anchor = float(take.frame_times[0]) if len(take.frame_times) else start
-    k_lo = -math.floor((anchor - start) * take.fps + 1e-9)
-    k_hi = math.floor((end - anchor) * take.fps + 1e-9)
+    # times on the file's nanosecond clock: a take that ends on its last film frame (no
+    # run-out) can end half a nanosecond before the grid's last point, which is that frame
+    slack = 1e-6  # [frames]
+    k_lo = -math.floor((anchor - start) * take.fps + slack)
+    k_hi = math.floor((end - anchor) * take.fps + slack)
     times = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
     # the grid's film frames at the frames' own stamps: those are whole nanoseconds (the
     # file's clock), and the grid's sums can be a nanosecond off them

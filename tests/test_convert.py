@@ -272,6 +272,24 @@ def test_frames_are_timed_as_the_shot(runs: dict[str, Run], key: str) -> None:
     assert take.t[-1] >= take.frame_times[-1] - 0.5e-9
 
 
+@pytest.mark.parametrize("key", ["maya_dolly_push_in", "crane_still", "crane_gentle"])
+def test_every_film_frame_has_a_tf_sample_at_its_own_stamp(runs: dict[str, Run],
+                                                          key: str) -> None:
+    """/tf is sampled at the film's frame rate through the whole take, one message on every
+    film frame's own stamp, the last frame too where the take ends on it (a settled end, no
+    run-out: the nanosecond clock put the take's end half a nanosecond before the grid's last
+    point, and /tf lost the last frame). Read with the mcap library's own reader."""
+    from mcap.reader import make_reader
+
+    with runs[key].mcap.open("rb") as stream:
+        reader = make_reader(stream)
+        tf = {m.log_time for _s, _c, m in reader.iter_messages(topics=["/tf"])}
+        stream.seek(0)
+        frames = [m.log_time for _s, _c, m in make_reader(stream).iter_messages(
+            topics=["/shot/frames"])]
+    assert frames and all(t in tf for t in frames), sorted(set(frames) - tf)
+
+
 # --------------------------------------------------------------------------------------------
 # 2. Every frame is a servo sample of /joint_states
 # --------------------------------------------------------------------------------------------

@@ -622,7 +622,8 @@ def test_report_shows_the_run_up_and_run_out_use_the_terminal_prints(tmp_path: P
     shot's, in convert's table, convert --report's page and camtraj report's page of the file
     (recorded in its metadata), the same text in all three."""
     mcap, html, again = tmp_path / "d.mcap", tmp_path / "convert.html", tmp_path / "file.html"
-    proc = run_cli("convert", MAYA, "-o", mcap, "--report", html)
+    # gentle ends: the push-in settles at both ends, so with still ones it has no run-up
+    proc = run_cli("convert", MAYA, "-o", mcap, "--report", html, "--edges", "gentle")
     assert proc.returncode == 0, proc.stderr
     assert run_cli("report", mcap, "-o", again).returncode == 0
     header = next(ln for ln in proc.stdout.splitlines() if "ends: accel" in ln)
