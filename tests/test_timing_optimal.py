@@ -332,3 +332,36 @@ def test_a_camera_hold_with_a_lens_move_inside_is_said_when_the_retime_changes_i
     assert abs(now / was - 1.0) > 0.01, (now, was)
     assert (f"frames 20-44: the camera holds still but focus moves, so the retime plays the "
             f"hold in {now:.2f} s, not {was:.2f} s") in take.report.warnings
+
+
+def test_an_end_at_rest_starts_and_ends_the_retime_nearly_still(limits: Limits) -> None:
+    """A cosine-eased slide, at rest at both ends (velocity zero, its acceleration the
+    ease's own), that could run 4x faster than real time. Retimed with those ends at rest,
+    the take starts and ends on its frames at a tenth of the film's pace: the first and last
+    frame's acceleration is a hundredth of the shot's there at real time, so the run-up and
+    run-out have next to nothing to build (played at the uniform take's 4x, those frames got
+    16x the shot's acceleration and the run-up swung the camera 15 cm), and the whole take is
+    still shorter than the uniform one at the maximum feasible speed, run-up and run-out
+    included."""
+    n = 61
+    t = frame_times(n)
+    s = 0.5 - 0.5 * np.cos(np.pi * np.arange(n) / (n - 1))
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 0.3 * s
+    q[:, ROTATE] += 0.15 * s
+    rest = np.zeros((2, 8), dtype=np.int8)
+    rest[:] = 1  # at rest, not settled: the cosine ease accelerates at its ends
+    real = time_shot(q, t, limits, mode="shot", rest=rest)
+    take = time_shot(q, t, limits, mode="optimal", rest=rest)
+    assert not take.uniform
+    assert real.report.max_speed > 3.0
+    fast = time_shot(q, frame_times(n, FPS * real.report.max_speed), limits, mode="scale",
+                     rest=rest)
+    assert take.t[-1] < fast.t[-1], (take.t[-1], fast.t[-1])
+    for i in (0, -1):
+        k, k_real = take.frame_samples[i], real.frame_samples[i]
+        assert np.abs(take.qd[k]).max() <= 1e-12
+        shot_acc = np.abs(real.qdd[k_real])
+        assert np.all(np.abs(take.qdd[k]) <= 0.0101 * shot_acc + 1e-12), (take.qdd[k], shot_acc)
+    for side in (take.report.runup, take.report.runout):
+        assert side["duration"] <= 0.02, side["duration"]

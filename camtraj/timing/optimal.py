@@ -38,7 +38,8 @@ still at the two ends of a hold (every axis is clamped to the hold's line with z
 acceleration there), so the speed along the path may change at the hold without any axis
 noticing. A stretch that starts or ends the shot does so no faster than the uniform take
 whose run-up and run-out fit (``u`` at most its, ``u' = u'' = 0``), so the run-up and
-run-out have room. Units: SI (m, rad, s); x in frames.
+run-out have room; at an end where the path is at rest, at :data:`REST_PACE` of the film's
+pace (the frame's acceleration is then next to nothing for the run-up to build). Units: SI (m, rad, s); x in frames.
 """
 
 from __future__ import annotations
@@ -98,6 +99,13 @@ ROW_SPREAD = 3
 ALL_ROWS_ABOVE = 0.5
 #: The path speed stays between these multiples of the scale take's speed.
 SPEED_RANGE = (1e-2, 1e3)
+#: At an end of the shot where the path is at rest, the retime's path speed there as a share
+#: of the film's own: the frame's acceleration is then its square (1%) of the shot's there (the
+#: path's velocity is zero, its acceleration is the path's curvature times the speed
+#: squared), and the run-up has next to nothing to build. Played at the uniform take's
+#: speed, a cosine-eased slide at 5.2x real time got 27x its authored acceleration on its
+#: first frame, and the run-up swung the camera 15 cm.
+REST_PACE = 0.1
 
 #: The programs' rows are relaxed by this fraction, so that an answer that meets them within
 #: the solver's tolerance meets them when its state starts the next window (the check after
@@ -206,6 +214,7 @@ def _basis(x: Array, a: int, b: int) -> tuple[IntArray, Array]:
 
 def optimal(
     path: FramePath, limits: Limits, rate: float, scale_factor: float,
+    rest: tuple[bool, bool] = (False, False),
 ) -> tuple[Array, Array, Samples, IntArray] | None:
     """Fastest traversal of the path under velocity, acceleration and jerk limits.
 
@@ -216,6 +225,10 @@ def optimal(
             steps no longer than ``1 / rate``, so every frame is a sample.
         scale_factor: The slow-down of the uniform take the answer must beat (its run-up
             and run-out fit): the shot starts and ends no faster than it.
+        rest: Whether the path is at rest on its first / last frame (the camera is, and
+            the path's velocity is zero there): the retime starts (ends) there nearly
+            still, at :data:`REST_PACE` of the film's own pace, so it does not give that
+            frame an acceleration the run-up would have to build.
 
     Returns:
         Sample times of the shot part from the first frame [s], the frame coordinate of each
@@ -226,10 +239,13 @@ def optimal(
     dt = path.dt
     limits = replace(limits, jerk=limits.jerk * (1.0 - CLOCK_HEADROOM))
     u_scale = 0.5 / (scale_factor * dt) ** 2
+    # u at a shot's end: the uniform take's, or nearly still at an end at rest
+    still_end = max((REST_PACE * scale_factor) ** 2, SPEED_RANGE[0] ** 2)
+    caps = (still_end if rest[0] else 1.0, still_end if rest[1] else 1.0)
     still_all = np.all(path.still, axis=1)
     laws = []
     for a, b in runs(~still_all):
-        law = _solve_stretch(path, a, b, limits, u_scale)
+        law = _solve_stretch(path, a, b, limits, u_scale, caps)
         if law is None:
             return None
         laws.append(law)
@@ -239,8 +255,8 @@ def optimal(
     for law in laws:
         durations[law.a : law.b] = law.frame_durations()
     frame_t[1:] = np.cumsum(durations)
-    if frame_t[-1] >= scale_factor * dt * (n - 1):
-        return None
+    if frame_t[-1] >= scale_factor * dt * (n - 1) and not any(rest):
+        return None  # (an end at rest: the uniform take's longer run-up may make up for it)
 
     # Every frame interval cut into the fewest equal steps no longer than 1 / rate; the
     # last frame is one more sample.
@@ -286,7 +302,8 @@ def _timed(path: FramePath, x: Array, xd: Array, xdd: Array, xddd: Array,
 
 
 def _solve_stretch(
-    path: FramePath, a: int, b: int, limits: Limits, u_scale: float
+    path: FramePath, a: int, b: int, limits: Limits, u_scale: float,
+    caps: tuple[float, float] = (1.0, 1.0),
 ) -> _TimeLaw | None:
     """``u(x)`` on frames a..b, window by window, checked and slowed to fit.
 
@@ -304,15 +321,17 @@ def _solve_stretch(
     stretch is removed by slowing the whole law uniformly.
     """
     shot_start, shot_end = a == 0, b == path.n - 1
-    safe = _safe_speeds(path, a, b, limits, u_scale, end=1.0 if shot_end else None)
+    start_cap, end_cap_shot = caps
+    safe = _safe_speeds(path, a, b, limits, u_scale, end=end_cap_shot if shot_end else None)
     k = KNOTS_PER_FRAME
-    start = min(1.0, float(safe[0])) if shot_start or shot_end else float(safe[0])
+    start = (min(start_cap if shot_start else 1.0, end_cap_shot if shot_end else 1.0,
+                 float(safe[0])) if shot_start or shot_end else float(safe[0]))
     coef = np.full((b - a) * k + 3, start)
     s = a
     while True:
         last = b - s <= WINDOW + LOOKAHEAD
         e = b if last else s + WINDOW + LOOKAHEAD
-        end_cap = (1.0 if shot_end else None) if last else float(safe[e - a])
+        end_cap = (end_cap_shot if shot_end else None) if last else float(safe[e - a])
         # From the candidate: what is known so far, then the constant speed it ends in.
         candidate = coef[(s - a) * k : (e - a) * k + 3].copy()
         extra = np.zeros(0)
@@ -320,7 +339,7 @@ def _solve_stretch(
         for _repair in range(REPAIRS + 1):
             rows = _Rows.build(path, s, e, limits, u_scale,
                                fixed=None if s == a else candidate[:3],
-                               start_cap=1.0 if s == a and shot_start else None,
+                               start_cap=start_cap if s == a and shot_start else None,
                                end_cap=end_cap, extra=extra)
             found = _scp(rows, candidate)
             if found is None:
@@ -342,11 +361,14 @@ def _solve_stretch(
         s += WINDOW
     law = _TimeLaw(a, b, coef * u_scale)
     factor, _ = _overshoot(path, law, limits)
-    # At the shot's ends no faster than scale (the programs meet that to their tolerance).
-    ends = [float(x) for x, on in ((a, shot_start), (b, shot_end)) if on]
+    # At the shot's ends no faster than their caps (the programs meet them to their
+    # tolerance).
+    ends = [(float(x), cap) for x, on, cap in ((a, shot_start, start_cap),
+                                               (b, shot_end, end_cap_shot)) if on]
     if ends:
-        u_end = law.derivs(np.array(ends))[0] / u_scale
-        factor = max(factor, math.sqrt(float(u_end.max())) * (1.0 + 1e-12))
+        u_end = law.derivs(np.array([x for x, _ in ends]))[0] / u_scale
+        over = max(float(u) / cap for u, (_, cap) in zip(u_end, ends, strict=True))
+        factor = max(factor, math.sqrt(over) * (1.0 + 1e-12))
     if not math.isfinite(factor):
         return None
     return law.slowed(factor) if factor > 1.0 else law

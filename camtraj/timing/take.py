@@ -304,7 +304,9 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         length = _uniform_length((speed_factor, ticks, shot, shot_x, up, out), n, dt)
-        retimed = optimal(path, limits, rate, speed_factor)
+        resting = (False, False) if rest_mask is None else (
+            bool(rest_mask[0].any()), bool(rest_mask[1].any()))
+        retimed = optimal(path, limits, rate, speed_factor, resting)
         if retimed is not None:
             r_up, r_out = _build_edges(retimed[2], limits, ends, start_q, 1.0 / rate, frames)
             if (r_up.q.shape[0] + r_out.q.shape[0]) / rate + retimed[0][-1] >= length:
