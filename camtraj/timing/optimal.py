@@ -39,7 +39,8 @@ acceleration there), so the speed along the path may change at the hold without 
 noticing. A stretch that starts or ends the shot does so no faster than the uniform take
 whose run-up and run-out fit (``u`` at most its, ``u' = u'' = 0``), so the run-up and
 run-out have room; at an end where the path is at rest, at :data:`REST_PACE` of the film's
-pace (the frame's acceleration is then next to nothing for the run-up to build). Units: SI (m, rad, s); x in frames.
+pace (the frame's acceleration is then next to nothing for the run-up to build). Units:
+SI (m, rad, s); x in frames.
 """
 
 from __future__ import annotations
