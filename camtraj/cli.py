@@ -544,7 +544,19 @@ MAX_SHOWN_SPEED = 100.0
 """Above this many times real time the report says ">10000%" (the number means nothing)."""
 SWING_NOTE_M = 1e-3
 """[m] A run-up or run-out that moves the camera further than this around a frame where the
-camera is at rest gets a note pointing at ``--edges still``."""
+camera is at rest (or turns it further than :data:`SWING_NOTE_DEG`) gets a note pointing at
+``--edges still``."""
+SWING_NOTE_DEG = 0.1
+"""[deg] The camera's turn in a run-up or run-out that gets the note (:data:`SWING_NOTE_M`),
+and below which the turn is not printed (a pan alone moves the camera little)."""
+
+
+def _travel(part: dict[str, Any]) -> str:
+    """How far the run-up or run-out moves the camera: '4.2 cm', and its turn where that is
+    :data:`SWING_NOTE_DEG` or more ('2.1 cm and turns 3.3 deg')."""
+    turn = part.get("camera_turn_deg", 0.0)
+    return distance(part["camera_travel_m"]) + (f" and turns {turn:.1f} deg"
+                                                if turn >= SWING_NOTE_DEG else "")
 
 
 def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
@@ -667,12 +679,14 @@ def _report(r: dict[str, Any]) -> str:
     lines.append(f"  run-up {seconds(r['shot_start'])} s, run-out "
                  f"{seconds(r['duration'] - r['shot_end'])} s ({r.get('edges', 'gentle')}; "
                  "ends column: their peak use of the limits); the camera moves "
-                 f"{distance(r['runup']['camera_travel_m'])} before the first frame, "
-                 f"{distance(r['runout']['camera_travel_m'])} after the last")
+                 f"{_travel(r['runup'])} before the first frame, "
+                 f"{_travel(r['runout'])} after the last")
     fr = r["frames"]
     swung = [(frame, part) for frame, part in ((fr["first"], r["runup"]),
                                                (fr["last"], r["runout"]))
-             if part.get("camera_at_rest") and part["camera_travel_m"] > SWING_NOTE_M
+             if part.get("camera_at_rest") and (part["camera_travel_m"] > SWING_NOTE_M
+                                               or part.get("camera_turn_deg", 0.0)
+                                               > SWING_NOTE_DEG)
              and not part.get("from_start_pose")]
     if swung and r.get("edges") != "still":
         where = " and ".join(f"frame {frame}" for frame, _ in swung)

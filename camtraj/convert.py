@@ -653,7 +653,9 @@ def summary(
         return {
             "duration_s": part.get("duration", 0.0),
             # how far the camera moves from the first (last) frame's position before (after)
-            "camera_travel_m": travel[side],
+            "camera_travel_m": travel[side][0],
+            # and how far it turns [deg] (a pan alone moves it little)
+            "camera_turn_deg": math.degrees(travel[side][1]),
             # whether the authored camera is at rest on that frame (--edges still keeps the
             # robot still there too)
             "camera_at_rest": bool(resting[side]),
@@ -704,19 +706,23 @@ def summary(
     }
 
 
-def camera_travel(analysis: Analysis) -> tuple[float, float]:
-    """How far [m] the camera moves from its first frame's position during the run-up, and
-    from its last frame's during the run-out (a robot whose redundant axes still move on a
-    frame where the camera is at rest swings the camera around it: ``--edges still``)."""
+def camera_travel(analysis: Analysis) -> list[tuple[float, float]]:
+    """How far the camera moves [m] and turns [rad] from its first frame's pose during the
+    run-up, and from its last frame's during the run-out, at most (a robot whose redundant
+    axes still move on a frame where the camera is at rest swings the camera around it:
+    ``--edges still``)."""
     take, robot = analysis.take, analysis.robot
     assert take is not None
     out = []
     for part, frame in ((slice(0, int(take.frame_samples[0]) + 1), int(take.frame_samples[0])),
                         (slice(int(take.frame_samples[-1]), None), int(take.frame_samples[-1]))):
-        at = robot.camera_pose(take.q[part, :8])[:, :3, 3]
-        here = robot.camera_pose(take.q[frame, :8])[:3, 3]
-        out.append(float(np.linalg.norm(at - here, axis=1).max()))
-    return out[0], out[1]
+        at = robot.camera_pose(take.q[part, :8])
+        here = robot.camera_pose(take.q[frame, :8])
+        moved = float(np.linalg.norm(at[:, :3, 3] - here[:3, 3], axis=1).max())
+        # the angle of each pose's rotation from the frame's: trace(R0^T R) = 1 + 2 cos
+        cos = (np.einsum("ij,kij->k", here[:3, :3], at[:, :3, :3]) - 1.0) / 2.0
+        out.append((moved, float(np.arccos(np.clip(cos, -1.0, 1.0)).max())))
+    return out
 
 
 def _move_to_start(analysis: Analysis) -> dict[str, Any]:

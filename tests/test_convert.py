@@ -29,6 +29,7 @@ import pytest
 from numpy.typing import NDArray
 from pxr import Usd, UsdGeom
 from scipy.optimize import minimize
+from scipy.spatial.transform import Rotation
 
 import camtraj
 from camtraj.mcap_io import ReadTake, read_take
@@ -469,10 +470,22 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     travel is what FK of the decoded samples measures."""
     travel, speed = {}, {}
     for key in ("crane_gentle", "crane_still", "crane_still_optimal", "crane_optimal"):
-        travel[key], speed[key] = _end_motion(robot, runs[key].take())
+        take = runs[key].take()
+        travel[key], speed[key] = _end_motion(robot, take)
         data = runs[key].summary_json()
         got = [data["runup"]["camera_travel_m"], data["runout"]["camera_travel_m"]]
         np.testing.assert_allclose(got, travel[key], rtol=0, atol=1e-6)
+        # and its turn: the angle between the camera's orientation (FK) and the end frame's
+        idx = frame_indices(take)
+        rots = robot.camera_pose(take.q)[:, :3, :3]
+        turn = [max(np.degrees(Rotation.from_matrix(rots[i].T @ r).magnitude())
+                    for r in rots[part]) for i, part in ((idx[0], slice(0, idx[0] + 1)),
+                                                        (idx[-1], slice(idx[-1], None)))]
+        got = [data["runup"]["camera_turn_deg"], data["runout"]["camera_turn_deg"]]
+        np.testing.assert_allclose(got, turn, rtol=0, atol=1e-6)
+        if max(turn) >= 0.1:  # said with the distance
+            assert re.search(r"the camera moves [0-9.]+ c?m?m and turns [0-9.]+ deg",
+                             runs[key].proc.stdout), runs[key].proc.stdout
     for key in ("crane_still", "crane_still_optimal"):
         use = np.abs(speed[key]) / robot.max_velocity
         assert use.max() <= 1e-3, f"{key}: the ends move at {use.max():.2g} of a velocity limit"
