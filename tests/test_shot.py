@@ -537,3 +537,9 @@ def test_a_camera_eased_so_its_acceleration_fades_has_settled() -> None:
         for k, a in enumerate(np.radians(60.0 * cubic)):
             pan[k, :2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
         assert camera_rests(pan, dt) == (AT_REST, AT_REST), n
+    # a shake of a few frames' period is no ease: moving at its ends, whatever a polynomial
+    # through its end frames reads there (1 cm, 7 frames, at full speed on both end frames)
+    k = np.arange(50)
+    assert camera_rests(truck(0.01 * np.sin(2 * np.pi * k / 7.0)), dt) == (FREE, FREE)
+    # three frames: too few for the end fit, the spline alone decides
+    assert camera_rests(truck(np.array([0.0, 0.02, -0.01])), dt) == (FREE, FREE)

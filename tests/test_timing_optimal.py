@@ -365,3 +365,27 @@ def test_an_end_at_rest_starts_and_ends_the_retime_nearly_still(limits: Limits) 
         assert np.all(np.abs(take.qdd[k]) <= 0.0101 * shot_acc + 1e-12), (take.qdd[k], shot_acc)
     for side in (take.report.runup, take.report.runout):
         assert side["duration"] <= 0.02, side["duration"]
+
+
+def test_a_settled_end_is_retimed_at_full_pace(limits: Limits) -> None:
+    """A settled end (velocity and acceleration zero: a quintic ease) has no acceleration at
+    any pace, so the retime does not slow down there: it beats the uniform take at the
+    maximum feasible speed (it fell back to that take, with a warning, when settled ends were
+    slowed like ends at rest), and its ends need no run-up or run-out."""
+    n = 49
+    t = frame_times(n)
+    u = np.arange(n) / (n - 1)
+    s = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
+    q = np.tile(HOME, (n, 1))
+    q[:, TRACK] += 0.5 * s
+    q[:, ROTATE] += 0.1 * s
+    rest = np.full((2, 8), 2, dtype=np.int8)
+    real = time_shot(q, t, limits, mode="shot", rest=rest)
+    take = time_shot(q, t, limits, mode="optimal", rest=rest)
+    fast = time_shot(q, frame_times(n, FPS * real.report.max_speed), limits, mode="scale",
+                     rest=rest)
+    assert not take.uniform
+    assert not any("found no" in w for w in take.report.warnings), take.report.warnings
+    assert take.t[-1] < 0.95 * fast.t[-1], (take.t[-1], fast.t[-1])
+    for side in (take.report.runup, take.report.runout):
+        assert side["duration"] <= 0.01, side["duration"]

@@ -104,20 +104,22 @@ quintic push-in of 30 cm at 24 fps as moving at 3 mm/s, and the run-up then swun
 
 
 def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
-    """How the camera (or flange) rests on the first / last frame, as
-    :meth:`FramePath.fit <camtraj.timing.path.FramePath.fit>`'s levels.
+    """How the camera (or flange) rests on the first / last frame, as :meth:`FramePath.fit
+    <camtraj.timing.path.FramePath.fit>`'s levels.
 
-    The camera's velocity and acceleration at an end frame are estimated twice: by the
-    timing stage's spline through every frame (:mod:`camtraj.timing.path`, free ends) on the
-    rows of the pose (rotation and translation), and by the least-squares polynomial through
-    the end frame and the frames next to it (:data:`END_FIT`) on its position and rotation
-    vector; the end rests as the more restful of the two says. At rest (``AT_REST``): the
-    velocity is below :data:`REST_SPEED` and :data:`REST_TURN`, and below :data:`REST_SHARE`
-    of the move's own pace. Settled (``SETTLED``): at rest and the acceleration below
+    The camera's velocity and acceleration at an end frame are estimated twice: by the timing
+    stage's spline through every frame (:mod:`camtraj.timing.path`, free ends) on the rows of
+    the pose (rotation and translation), and by the least-squares polynomial through the end
+    frame and the frames next to it (:data:`END_FIT`) on its position and rotation vector, where
+    the shot has that many frames and the polynomial misses none of them by more than
+    :data:`REST_SHARE` of the move's pace (an ease; a shake of a few frames' period is no
+    polynomial); the end rests as the more restful of the two says. At rest (``AT_REST``): the
+    velocity is below :data:`REST_SPEED` and :data:`REST_TURN`, and below :data:`REST_SHARE` of
+    the move's own pace. Settled (``SETTLED``): at rest and the acceleration below
     :data:`SETTLE_SHARE` of the move's own, or below :data:`SETTLE_ACCEL` and
-    :data:`SETTLE_TURN` (the camera eased in, not stopping hard). The robot rests there the
-    same way (zero velocity on that frame, and zero acceleration where settled: no run-up or
-    run-out swings the camera around a still first or last frame); ``FREE`` otherwise."""
+    :data:`SETTLE_TURN` (the camera eased in, not stopping hard). The robot rests there the same
+    way (zero velocity on that frame, and zero acceleration where settled: no run-up or run-out
+    swings the camera around a still first or last frame); ``FREE`` otherwise."""
     from camtraj.timing.path import AT_REST, FREE, SETTLED, end_jerk
     from camtraj.timing.quintic import solve_knot_derivatives
 
@@ -129,7 +131,7 @@ def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
     zero = np.zeros(coords.shape)
     v, w = solve_knot_derivatives(coords, free, zero, zero, end_jerk(coords, free[1:]))
     # per end: (speed, turning rate, acceleration, turning acceleration), per frame
-    spline = []
+    spline: list[tuple[float, float, float, float]] = []
     for k in (0, n - 1):
         dd = w[k].reshape(3, 4)  # d2 pose / d frame2, measured as the frames' changes are
         spline.append((*_pose_rates(targets[k], v[k]), _largest(dd[None, :, 3]),
@@ -143,10 +145,19 @@ def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
             min(REST_TURN * dt, max(REST_SHARE * pace[1], ROUND_OFF)))
     calm = (max(SETTLE_SHARE * accel[0], SETTLE_ACCEL * dt * dt, ROUND_OFF),
             max(SETTLE_SHARE * accel[1], SETTLE_TURN * dt * dt, ROUND_OFF))
+    # the local fit counts where it has frames to spare and describes them (an ease does, a
+    # shake of a few frames' period does not): it misses none by more than REST_SHARE of
+    # the pace
+    fits: list[list[tuple[float, float, float, float]]] = [[spline[0]], [spline[1]]]
+    if n >= END_FIT[0]:
+        for side, rates in enumerate(_end_rates(targets)):
+            if (rates[4] <= max(REST_SHARE * pace[0], ROUND_OFF)
+                    and rates[5] <= max(REST_SHARE * pace[1], ROUND_OFF)):
+                fits[side].append(rates[:4])
     out = []
-    for side, local in enumerate(_end_rates(targets)):
+    for side in range(2):
         level = FREE
-        for speed, rate, acc, turn_acc in (spline[side], local):
+        for speed, rate, acc, turn_acc in fits[side]:
             if speed <= slow[0] and rate <= slow[1]:
                 level = max(level, SETTLED if acc <= calm[0] and turn_acc <= calm[1]
                             else AT_REST)
@@ -154,27 +165,26 @@ def camera_rests(targets: Array, dt: float) -> tuple[int, int]:
     return out[0], out[1]
 
 
-def _end_rates(targets: Array) -> list[tuple[float, float, float, float]]:
+def _end_rates(targets: Array) -> list[tuple[float, float, float, float, float, float]]:
     """Speed, turning rate, acceleration and turning acceleration (per frame, per frame^2) of
-    poses (n, 4, 4), n >= 3, at the first and the last frame: those of the least-squares
-    polynomial of :data:`END_FIT` through the end frame (fewer frames and a lower degree for
-    a short shot) fitted to the positions and the rotation vectors from the end frame's
-    orientation of the frames next to it."""
+    poses (n, 4, 4), n >= :data:`END_FIT` frames, at the first and the last frame: those of
+    the least-squares polynomial of :data:`END_FIT` through the end frame fitted to the
+    positions and the rotation vectors from the end frame's orientation of the frames next to
+    it; and how far the fit misses those frames, at most, in position and in turn."""
     from scipy.spatial.transform import Rotation
 
     frames, degree = END_FIT
-    k = min(targets.shape[0], frames)
-    degree = min(degree, k - 2)
-    t = np.arange(1, k, dtype=float)
+    t = np.arange(1, frames, dtype=float)
     basis = np.stack([t ** p for p in range(1, degree + 1)], axis=1)
     out = []
-    for poses in (targets[:k], targets[::-1][:k]):
+    for poses in (targets[:frames], targets[::-1][:frames]):
         turn = Rotation.from_matrix(poses[0, :3, :3].T @ poses[1:, :3, :3]).as_rotvec()
         rows = np.concatenate([poses[1:, :3, 3] - poses[0, :3, 3], turn], axis=1)
         c = np.linalg.lstsq(basis, rows, rcond=None)[0]
-        acc = 2.0 * c[1] if degree > 1 else np.zeros(6)
+        miss = rows - basis @ c
         out.append((float(np.linalg.norm(c[0, :3])), float(np.linalg.norm(c[0, 3:])),
-                    float(np.linalg.norm(acc[:3])), float(np.linalg.norm(acc[3:]))))
+                    float(np.linalg.norm(2.0 * c[1, :3])), float(np.linalg.norm(2.0 * c[1, 3:])),
+                    _largest(miss[:, :3]), _largest(miss[:, 3:])))
     return out
 
 

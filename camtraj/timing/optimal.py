@@ -31,7 +31,8 @@ by just enough (velocity scales with the slow-down, jerk with its cube). The ser
 are checked once more, by their analytic values and by divided differences of the sampled
 positions. If the answer is not shorter than the uniform take it must beat (the
 ``"scale"`` take, or the whole shot at its maximum feasible speed), :func:`optimal` returns
-None and the caller keeps that one.
+None and the caller keeps that one (with an end at rest the caller decides on the whole
+takes: the uniform take's run-up from such an end is the long part).
 
 Stretches where no axis moves are kept as holds of their original duration. The path is
 still at the two ends of a hold (every axis is clamped to the hold's line with zero
@@ -105,7 +106,8 @@ SPEED_RANGE = (1e-2, 1e3)
 #: path's velocity is zero, its acceleration is the path's curvature times the speed
 #: squared), and the run-up has next to nothing to build. Played at the uniform take's
 #: speed, a cosine-eased slide at 5.2x real time got 27x its authored acceleration on its
-#: first frame, and the run-up swung the camera 15 cm.
+#: first frame, and the run-up swung the camera 15 cm. (Never faster than the uniform take,
+#: and no slower than the programs' least speed, :data:`SPEED_RANGE`.)
 REST_PACE = 0.1
 
 #: The programs' rows are relaxed by this fraction, so that an answer that meets them within
@@ -226,22 +228,25 @@ def optimal(
             steps no longer than ``1 / rate``, so every frame is a sample.
         scale_factor: The slow-down of the uniform take the answer must beat (its run-up
             and run-out fit): the shot starts and ends no faster than it.
-        rest: Whether the path is at rest on its first / last frame (the camera is, and
-            the path's velocity is zero there): the retime starts (ends) there nearly
-            still, at :data:`REST_PACE` of the film's own pace, so it does not give that
-            frame an acceleration the run-up would have to build.
+        rest: Whether the path is at rest, not settled, on its first / last frame (its
+            joints' velocity is zero there, their acceleration not; lens axes may move): the
+            retime starts (ends) there nearly still, at :data:`REST_PACE` of the film's own
+            pace (or the uniform take's, if slower), so it does not give that frame an
+            acceleration the run-up would have to build.
 
     Returns:
         Sample times of the shot part from the first frame [s], the frame coordinate of each
-        sample, the samples, and the sample index of every frame; or None when the answer is
-        not shorter than the scale take (the caller keeps that one).
+        sample, the samples, and the sample index of every frame; or None when the answer's
+        shot part is not shorter than the scale take's (the caller keeps that one; with an
+        end at rest the caller compares whole takes, the uniform one's run-up included).
     """
     n = path.n
     dt = path.dt
     limits = replace(limits, jerk=limits.jerk * (1.0 - CLOCK_HEADROOM))
     u_scale = 0.5 / (scale_factor * dt) ** 2
-    # u at a shot's end: the uniform take's, or nearly still at an end at rest
-    still_end = max((REST_PACE * scale_factor) ** 2, SPEED_RANGE[0] ** 2)
+    # u at a shot's end: the uniform take's, or nearly still at an end at rest (never
+    # faster than the uniform take's: a take slowed more than tenfold is slower already)
+    still_end = min(1.0, max((REST_PACE * scale_factor) ** 2, SPEED_RANGE[0] ** 2))
     caps = (still_end if rest[0] else 1.0, still_end if rest[1] else 1.0)
     still_all = np.all(path.still, axis=1)
     laws = []

@@ -42,7 +42,7 @@ from camtraj.timing.limits import (
     violations_in,
 )
 from camtraj.timing.optimal import optimal
-from camtraj.timing.path import FREE, HOLD_TOL, SETTLED, FramePath, Samples, runs
+from camtraj.timing.path import AT_REST, FREE, HOLD_TOL, SETTLED, FramePath, Samples, runs
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -304,8 +304,10 @@ def time_shot(
         shot_t = np.arange(shot_x.size) / shot_rate
         frame_idx = np.arange(n, dtype=np.int64) * ticks
         length = _uniform_length((speed_factor, ticks, shot, shot_x, up, out), n, dt)
+        # ends at rest but not settled: their acceleration is the path's curvature times the
+        # speed squared (a settled end has none at any speed)
         resting = (False, False) if rest_mask is None else (
-            bool(rest_mask[0].any()), bool(rest_mask[1].any()))
+            bool(rest_mask[0].max() == AT_REST), bool(rest_mask[1].max() == AT_REST))
         retimed = optimal(path, limits, rate, speed_factor, resting)
         if retimed is not None:
             r_up, r_out = _build_edges(retimed[2], limits, ends, start_q, 1.0 / rate, frames)
