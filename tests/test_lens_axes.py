@@ -330,18 +330,25 @@ def test_animated_focus_and_stop_without_motors_warn(tmp_path: Path) -> None:
     assert re.search(r"f-stop \(f/[0-9.]+ to f/[0-9.]+\)", iris), iris
 
 
-def test_a_focus_and_stop_the_shot_leaves_unset_hold_at_home_and_say_so(tmp_path: Path) -> None:
-    """A shot that authors no focus distance or f-stop (0: a pinhole camera): the motors hold
-    at their homes (the lens file's first rows: 0.6 m, T2.8), and the run says so."""
+def _eased_truck(path: Path, n: int, focus_m: float, f_stop: float) -> Path:
+    """A shot of n frames on a Z-up metre stage: the camera trucks 1 m towards the subject,
+    eased, at 35 mm with the focus distance and f-stop given (0: unset)."""
     ms = make_samples()
-    frames = np.arange(FIRST, FIRST + 49, dtype=np.float64)
+    frames = np.arange(FIRST, FIRST + n, dtype=np.float64)
     s = ms.ease(np.linspace(0.0, 1.0, frames.size))
     pos = np.stack([6.5 - 1.0 * s, np.zeros_like(s), np.full_like(s, 1.4)], axis=1)
     pan, tilt = ms.look_at(pos, SUBJECT)
-    move = ms.Move(frames, pos, pan, tilt, focal_mm=35.0, focus_m=0.0, f_stop=0.0)
-    shot = tmp_path / "pinhole.usda"
-    shot.write_text(ms._header("camtraj test: pinhole", "Z", 1.0, frames, 24.0, "cam") + "\n"
-                    + ms._camera_prim_trs("cam", move, "Z", 1.0, "") + "\n", encoding="utf-8")
+    move = ms.Move(frames, pos, pan, tilt, focal_mm=35.0, focus_m=focus_m, f_stop=f_stop)
+    path.write_text(ms._header(f"camtraj test: {path.stem}", "Z", 1.0, frames, 24.0, "cam")
+                    + "\n" + ms._camera_prim_trs("cam", move, "Z", 1.0, "") + "\n",
+                    encoding="utf-8")
+    return path
+
+
+def test_a_focus_and_stop_the_shot_leaves_unset_hold_at_home_and_say_so(tmp_path: Path) -> None:
+    """A shot that authors no focus distance or f-stop (0: a pinhole camera): the motors hold
+    at their homes (the lens file's first rows: 0.6 m, T2.8), and the run says so."""
+    shot = _eased_truck(tmp_path / "pinhole.usda", 49, focus_m=0.0, f_stop=0.0)
     result = convert(shot, None, ConvertOptions(lens=str(ZOOM)))
     assert any(w.startswith("the shot does not set its focus distance: the focus motor holds "
                             "at its home (0.6 m") for w in result["warnings"]), result["warnings"]
@@ -359,14 +366,7 @@ def test_focus_at_infinity_reads_writes_and_drives_the_ring_to_its_infinity_mark
     motor stands on the table's infinity row until the pull to 2 m starts."""
     ms = make_samples()
     frames = np.arange(FIRST, FIRST + 73, dtype=np.float64)
-    s = ms.ease(np.linspace(0.0, 1.0, frames.size))
-    pos = np.stack([6.5 - 1.0 * s, np.zeros_like(s), np.full_like(s, 1.4)], axis=1)
-    pan, tilt = ms.look_at(pos, SUBJECT)
-    move = ms.Move(frames, pos, pan, tilt, focal_mm=35.0, focus_m=2.0, f_stop=4.0)
-    shot = tmp_path / "infinity.usda"
-    shot.write_text(ms._header("camtraj test: focus from infinity", "Z", 1.0, frames, 24.0,
-                               "cam") + "\n"
-                    + ms._camera_prim_trs("cam", move, "Z", 1.0, "") + "\n", encoding="utf-8")
+    shot = _eased_truck(tmp_path / "infinity.usda", 73, focus_m=2.0, f_stop=4.0)
     stage = Usd.Stage.Open(str(shot))
     focus_attr = UsdGeom.Camera(stage.GetPrimAtPath("/cam")).GetFocusDistanceAttr()
     focus_attr.Clear()
