@@ -543,3 +543,33 @@ def test_a_camera_eased_so_its_acceleration_fades_has_settled() -> None:
     assert camera_rests(truck(0.01 * np.sin(2 * np.pi * k / 7.0)), dt) == (FREE, FREE)
     # three frames: too few for the end fit, the spline alone decides
     assert camera_rests(truck(np.array([0.0, 0.02, -0.01])), dt) == (FREE, FREE)
+
+
+def test_a_robot_set_up_on_the_first_frame_keeps_that_solution(robot: Robot) -> None:
+    """With a start pose (``--start-from``) the run-up from it is part of the take. Started
+    from the default answer's own first frame (a crew that set the robot up there), a
+    truck that stops hard keeps that answer: it had been re-solved onto the other arm
+    configuration, 1.7% faster, whose run-up drove the track 6 m and the pan 149 deg over
+    4.9 s next to the set. The choice is among answers within 5% of the fastest."""
+    from camtraj.ik.path import NEAR_START, move_to_start
+
+    n, fps = 60, 30.0
+    u = np.linspace(0.0, 1.0, n)
+    ease = 3 * u ** 2 - 2 * u ** 3  # stops hard: at rest, accelerating
+    cams = np.tile(np.eye(4), (n, 1, 1))
+    for i, e in enumerate(ease):
+        eye = np.array([3.0 + 3.0 * e, 1.5, 1.5])
+        look = np.array([4.5 + 3.0 * e, -3.0, 1.2]) - eye
+        z = -look / np.linalg.norm(look)  # the camera looks down its -Z, +Y up
+        x = np.cross([0.0, 0.0, 1.0], z)
+        x /= np.linalg.norm(x)
+        cams[i, :3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+        cams[i, :3, 3] = eye
+    targets = cams @ np.linalg.inv(robot.camera2flange)
+    default = solve_path_report(robot, targets, frame_interval=1 / fps, still_ends=True)
+    first = default.q[0].copy()
+    placed = solve_path_report(robot, targets, first, frame_interval=1 / fps, still_ends=True)
+    assert move_to_start(robot, first, placed.q[0]).duration < 0.05
+    speeds = [max_speed(robot, p.q, fps, targets, p.rest_axes()) for p in (default, placed)]
+    assert speeds[1] >= (1.0 - NEAR_START) * speeds[0], speeds
+    assert pose_error(robot.fk(placed.q), targets)[0] < 1e-9
