@@ -104,7 +104,7 @@ class Result:
     collision_free: bool
     feasible: bool  # with the timing asked (at the shot's own, unless scale or optimal)
     max_speed: float
-    binding: str
+    binding: str  # what sets the maximum feasible speed (TimingReport.set_by)
     margins: dict[str, float] = field(default_factory=dict)
     reason: str = ""
 
@@ -148,17 +148,6 @@ def margins(robot: Robot, q: Array) -> dict[str, float]:
     cos_e = np.clip((dse**2 + dh.r6**2 - ws**2) / (2 * dh.r6 * dse), -1.0, 1.0)
     stretch = float(np.min(180.0 - np.degrees(np.arccos(cos_e))))
     return {"limits_use": limits_use, "wrist_deg": wrist, "stretch_deg": stretch}
-
-
-def _binding(peak_use: dict[str, dict[str, float]]) -> str:
-    """The axis and quantity that limit the speed (velocity, sqrt accel, cbrt jerk use)."""
-    best, name = -1.0, ""
-    for axis, use in peak_use.items():
-        for quantity, power in (("velocity", 1.0), ("acceleration", 0.5), ("jerk", 1 / 3)):
-            value = use.get(quantity, 0.0) ** power
-            if value > best:
-                best, name = value, f"{axis} {quantity}"
-    return name
 
 
 _WORKER: dict[str, Any] = {}
@@ -246,7 +235,7 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
             reason = str(collision_error(worst, Moments.of(t, t_frames, frames),
                                          problem.clearance))
     return Result(x, y, yaw_deg, full, 1.0, free, feasible, float(rep.max_speed),
-                  _binding(rep.peak_use), marg, reason)
+                  rep.set_by, marg, reason)
 
 
 Task = tuple[int, float, float, float, int]
@@ -762,8 +751,8 @@ def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
              f"in {report.seconds:.1f} s (floor z {report.base_z:.3f} m)",
-             "  #     x [m]     y [m]  yaw [deg]  speed  binding           limits use  wrist"
-             "  stretch  obstacle",
+             "  #     x [m]     y [m]  yaw [deg]  speed  limits use  wrist  stretch  obstacle"
+             "  set by",
              "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
              "stretch: margins)"]
     for i, r in enumerate(report.results, 1):
@@ -774,14 +763,16 @@ def table(report: PlaceReport) -> str:
 
 
 def columns(r: Result) -> str:
-    """A result's speed, binding axis, limits use, margins and obstacle distance columns."""
+    """A result's speed, limits use, margins, obstacle distance and what sets the speed
+    (the timing stage's ``set_by``, as convert says it) columns."""
     m = r.margins
     speed = speed_percent(min(r.max_speed, TABLE_MAX_SPEED)) if r.max_speed > 0 else "-"
     obst = m.get("obstacle_m")
     ob = "       -" if obst is None else ("   clear" if not math.isfinite(obst)
                                           else f"{obst:6.2f} m")
-    return (f"{speed:>5}  {r.binding:<20}  {100 * m.get('limits_use', 1.0):5.0f}%  "
-            f"{m.get('wrist_deg', 0.0):4.0f}°  {m.get('stretch_deg', 0.0):6.0f}°  {ob}")
+    return (f"{speed:>5}  {100 * m.get('limits_use', 1.0):9.0f}%  "
+            f"{m.get('wrist_deg', 0.0):4.0f}°  {m.get('stretch_deg', 0.0):6.0f}°  {ob}"
+            f"  {r.binding or '-'}")
 
 
 # ---------------------------------------------------------------------------------------------

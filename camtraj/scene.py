@@ -415,8 +415,7 @@ def smallest_split(n: int, cheap: Callable[[tuple[int, ...]], bool],
 # For people
 # ---------------------------------------------------------------------------------------------
 
-HEADER = ("  shot                      speed  binding           limits use  wrist  stretch"
-          "  obstacle")
+HEADER = ("  shot                      speed  limits use  wrist  stretch  obstacle  set by")
 
 
 def _rows(report: SceneReport, lay: Layout) -> list[str]:

@@ -474,4 +474,6 @@ def test_place_times_still_ends_as_convert_does(tmp_path: Path) -> None:
     assert still.take is not None and free.take is not None and still.path is not None
     assert still.path.rest == (SETTLED, SETTLED)  # the quintic ease settles at both ends
     assert best["max_speed"] == pytest.approx(still.take.report.max_speed, rel=1e-2)
+    # what sets it, as convert says it (place had its own reading of the peak use alone)
+    assert best["binding"] == still.take.report.set_by != ""
     assert still.take.report.max_speed < free.take.report.max_speed
