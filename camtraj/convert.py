@@ -29,7 +29,7 @@ from camtraj.errors import (
     RobotFileError,
     ShotFileError,
 )
-from camtraj.ik import PathSolution, camera_holds, camera_rests, solve_path_report
+from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.ik.path import move_to_start
 from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
@@ -645,9 +645,7 @@ def summary(
     warnings = run_warnings(analysis)
 
     travel = camera_travel(analysis)
-    # decided on the flange poses, as the solver decides --edges still
-    resting = camera_rests(analysis.targets @ np.linalg.inv(analysis.robot.camera2flange),
-                           1.0 / shot.fps)
+    resting = path.camera_rest  # as the solver decided it (for --edges still)
 
     def extents(part: dict[str, Any], side: int) -> dict[str, Any]:
         return {

@@ -103,10 +103,15 @@ class ConvertOptions:
 
     @property
     def timing_edges(self) -> str:
-        """The run-up and run-out the timing stage builds: ``"still"`` ends are gentle ones
-        (what keeps them still is the path's zero velocity where the camera rests, and zero
-        acceleration where it settles)."""
-        return "gentle" if self.edges == "still" else self.edges
+        """The run-up and run-out the timing stage builds (:func:`timing_edges`)."""
+        return timing_edges(self.edges)
+
+
+def timing_edges(edges: str) -> str:
+    """The run-up and run-out the timing stage builds for ``--edges``: ``"still"`` ends are
+    gentle ones (what keeps them still is the path's zero velocity where the camera rests, and
+    zero acceleration where it settles)."""
+    return "gentle" if edges == "still" else edges
 
 
 

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
 from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.inputs import one_line
-from camtraj.options import EDGE_OPTIONS, TIMING_MODES
+from camtraj.options import EDGE_OPTIONS, TIMING_MODES, timing_edges
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon, yaw_pose
@@ -210,7 +210,7 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
                          rate=problem.rate if full else min(problem.rate, 100.0),
                          frame_numbers=frames, hold=camera_holds(flange2base),
                          rest=path.rest_axes(q_time.shape[1]),
-                         edges="gentle" if problem.edges == "still" else problem.edges)
+                         edges=timing_edges(problem.edges))
     except TimingLimitError as exc:
         speed = exc.max_speed if math.isfinite(exc.max_speed) else 0.0
         return Result(x, y, yaw_deg, full, 1.0, True, False, speed, "position", marg, str(exc))

@@ -104,9 +104,10 @@ class PathSolution:
         start: The joint vector the robot starts from (8,) [m, rad]: home or ``start``.
         margins: The smallest distances to limits and singularities over the shot.
         rest: How the path rests on its first / last frame (``still_ends`` asked: the
-            camera's rest there, :func:`~camtraj.ik.shot.camera_rests`; else free): whatever
-            times it gives those ends zero velocity, and zero acceleration too where the
-            camera settles (:meth:`rest_axes`).
+            camera's rest there; else free): whatever times it gives those ends zero
+            velocity, and zero acceleration too where the camera settles (:meth:`rest_axes`).
+        camera_rest: How the camera rests on its first / last frame
+            (:func:`~camtraj.ik.shot.camera_rests`), whatever ``still_ends`` asked.
     """
 
     q: Array
@@ -116,6 +117,7 @@ class PathSolution:
     start: Array
     margins: PathMargins
     rest: tuple[int, int] = (FREE, FREE)
+    camera_rest: tuple[int, int] = (FREE, FREE)
 
     def rest_axes(self, axes: int = 8) -> NDArray[np.int8] | None:
         """``time_shot``'s ``rest`` for this path and ``axes - 8`` lens axes after its
@@ -207,7 +209,8 @@ def solve_path_report(
               f"{frame_interval!r}"
         raise ValueError(msg)
     dt = frame_interval or 1.0 / 24.0
-    rest = camera_rests(Ts, dt) if still_ends else (FREE, FREE)
+    camera_rest = camera_rests(Ts, dt)
+    rest = camera_rest if still_ends else (FREE, FREE)
     if obj == "shot":
         # scipy's own OpenBLAS (the refinement's banded solve) must be loaded before the limit
         # is set, or the limit does not reach it: two spinning BLAS threads per tiny solve
@@ -225,7 +228,7 @@ def solve_path_report(
     if frame_interval is not None and n > 1:
         bound = robot.max_velocity * frame_interval * (1.0 + 1e-9) + 1e-12
         steps[1:] = np.all(np.abs(np.diff(q, axis=0)) <= bound, axis=1)
-    return PathSolution(q, cost, steps, obj, first, path_margins(robot, q), rest)
+    return PathSolution(q, cost, steps, obj, first, path_margins(robot, q), rest, camera_rest)
 
 
 def _check_targets(targets: ArrayLike) -> Array:

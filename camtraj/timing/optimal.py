@@ -330,8 +330,9 @@ def _solve_stretch(
     start_cap, end_cap_shot = caps
     safe = _safe_speeds(path, a, b, limits, u_scale, end=end_cap_shot if shot_end else None)
     k = KNOTS_PER_FRAME
-    start = (min(start_cap if shot_start else 1.0, end_cap_shot if shot_end else 1.0,
-                 float(safe[0])) if shot_start or shot_end else float(safe[0]))
+    # a constant start, no faster than the caps of the shot's ends this stretch has
+    start = min([float(safe[0])] + [cap for cap, on in ((start_cap, shot_start),
+                                                        (end_cap_shot, shot_end)) if on])
     coef = np.full((b - a) * k + 3, start)
     s = a
     while True:
