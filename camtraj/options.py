@@ -165,11 +165,30 @@ def _parse_start_from(text: str) -> tuple[float, ...]:
 
 
 def _format_start_from(values: Sequence[float]) -> str:
+    """``--start-from``'s text for joint values (8,) [m, rad]: metres, and the shortest degrees
+    that convert back to the same radians (``--start-from 30`` is echoed as 30.0, not as
+    math.degrees' 29.999999999999996)."""
     from camtraj.robot import REVOLUTE
 
     return ",".join(
-        repr(math.degrees(v) if REVOLUTE[i] else float(v)) for i, v in enumerate(values)
+        _shortest_degrees(float(v)) if REVOLUTE[i] else repr(float(v))
+        for i, v in enumerate(values)
     )
+
+
+def _shortest_degrees(radians: float) -> str:
+    """The shortest decimal of degrees whose radians are exactly ``radians``."""
+    degrees = math.degrees(radians)
+    for digits in range(16):
+        text = repr(round(degrees, digits))
+        if math.radians(float(text)) == radians:
+            return text
+    near = degrees  # math.degrees may land an ulp or two off the value that was given
+    for _ in range(4):
+        near = math.nextafter(near, math.inf if math.radians(near) < radians else -math.inf)
+        if math.radians(near) == radians:
+            return repr(near)
+    return repr(degrees)
 
 
 def convert_options(func: F) -> F:

@@ -6,6 +6,7 @@ import dataclasses
 import json
 import math
 import os
+import random
 import shutil
 import subprocess
 import sys
@@ -378,6 +379,28 @@ def test_malformed_options_are_input_errors() -> None:
     assert options_to_args(more)[-4:] == [
         "--start-from", "1.0,90.0,0.0,0.0,-90.0,0.0,0.0,0.0", "--objective", "paper",
     ]  # fmt: skip
+
+
+def test_a_start_pose_is_passed_on_as_given_and_to_the_bit() -> None:
+    """A job or batch entry repeats --start-from as the user wrote it (30, not
+    29.999999999999996), and reading that text back gives the same radians to the bit."""
+    from camtraj.options import build_options as build
+
+    def passed(text: str) -> str:
+        options = build(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                        timing="shot", start_from=text)
+        return options_to_args(options)[-1]
+
+    assert passed("0.5,30,-45,12.25,0.1,270,-89.999,1e-7") == \
+        "0.5,30.0,-45.0,12.25,0.1,270.0,-89.999,1e-07"
+    rng = random.Random(7)
+    for _ in range(300):
+        text = ",".join(repr(rng.uniform(-300.0, 300.0)) for _ in range(8))
+        first = build(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                      timing="shot", start_from=text).start_from
+        again = build(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                      timing="shot", start_from=passed(text)).start_from
+        assert again == first
 
 
 def test_usd_flag_writes_rig_layers_and_counts_them_in_up_to_date(tmp_path: Path) -> None:
