@@ -19,8 +19,8 @@ if TYPE_CHECKING:
     from camtraj.timing import Take
     from camtraj.usd_shot import Shot
 
-__all__ = ["DEFAULT_SOURCE", "Analysis", "Placement", "axis_value", "margins_summary",
-           "placement_text"]
+__all__ = ["DEFAULT_SOURCE", "Analysis", "Placement", "axis_value", "camera_travel",
+           "margins_summary", "placement_text"]
 
 Array = NDArray[np.float64]
 
@@ -120,3 +120,22 @@ def margins_summary(analysis: Analysis) -> dict[str, Any]:
         "full_stretch_deg": math.degrees(m.stretch),
         "full_stretch_frame": int(frames[m.stretch_frame]),
     }
+
+
+def camera_travel(analysis: Analysis) -> list[tuple[float, float]]:
+    """How far the camera moves [m] and turns [rad] from its first frame's pose during the
+    run-up, and from its last frame's during the run-out, at most (a robot whose redundant
+    axes still move on a frame where the camera is at rest swings the camera around it:
+    ``--edges still``)."""
+    take, robot = analysis.take, analysis.robot
+    assert take is not None
+    out = []
+    for part, frame in ((slice(0, int(take.frame_samples[0]) + 1), int(take.frame_samples[0])),
+                        (slice(int(take.frame_samples[-1]), None), int(take.frame_samples[-1]))):
+        at = robot.camera_pose(take.q[part, :8])
+        here = robot.camera_pose(take.q[frame, :8])
+        moved = float(np.linalg.norm(at[:, :3, 3] - here[:3, 3], axis=1).max())
+        # the angle of each pose's rotation from the frame's: trace(R0^T R) = 1 + 2 cos
+        cos = (np.einsum("ij,kij->k", here[:3, :3], at[:, :3, :3]) - 1.0) / 2.0
+        out.append((moved, float(np.arccos(np.clip(cos, -1.0, 1.0)).max())))
+    return out

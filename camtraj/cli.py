@@ -42,7 +42,8 @@ from camtraj.options import (
 from camtraj.progress import Silent, TerminalProgress, progress_for
 from camtraj.robot import JOINT_NAMES, REVOLUTE
 from camtraj.shown import (
-    distance,
+    SHOWN_TURN_DEG,
+    camera_moves,
     edge_use,
     frame_rate,
     frame_span,
@@ -546,17 +547,13 @@ SWING_NOTE_M = 1e-3
 """[m] A run-up or run-out that moves the camera further than this around a frame where the
 camera is at rest (or turns it further than :data:`SWING_NOTE_DEG`) gets a note pointing at
 ``--edges still``."""
-SWING_NOTE_DEG = 0.1
-"""[deg] The camera's turn in a run-up or run-out that gets the note (:data:`SWING_NOTE_M`),
-and below which the turn is not printed (a pan alone moves the camera little)."""
+SWING_NOTE_DEG = SHOWN_TURN_DEG
+"""[deg] The camera's turn in a run-up or run-out that gets the note (:data:`SWING_NOTE_M`)."""
 
 
-def _travel(part: dict[str, Any]) -> str:
-    """How far the run-up or run-out moves the camera: '4.2 cm', and its turn where that is
-    :data:`SWING_NOTE_DEG` or more ('2.1 cm and turns 3.3 deg')."""
-    turn = part.get("camera_turn_deg", 0.0)
-    return distance(part["camera_travel_m"]) + (f" and turns {turn:.1f} deg"
-                                                if turn >= SWING_NOTE_DEG else "")
+def _moved(part: dict[str, Any]) -> tuple[float, float]:
+    """The camera's travel [m] and turn [deg] in a summary's run-up or run-out."""
+    return part["camera_travel_m"], part.get("camera_turn_deg", 0.0)
 
 
 def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
@@ -678,9 +675,8 @@ def _report(r: dict[str, Any]) -> str:
     # ruckig moves plus the holds that put the frames on servo ticks), as the report shows
     lines.append(f"  run-up {seconds(r['shot_start'])} s, run-out "
                  f"{seconds(r['duration'] - r['shot_end'])} s ({r.get('edges', 'gentle')}; "
-                 "ends column: their peak use of the limits); the camera moves "
-                 f"{_travel(r['runup'])} before the first frame, "
-                 f"{_travel(r['runout'])} after the last")
+                 "ends column: their peak use of the limits); "
+                 + camera_moves(_moved(r["runup"]), _moved(r["runout"])))
     fr = r["frames"]
     swung = [(frame, part) for frame, part in ((fr["first"], r["runup"]),
                                                (fr["last"], r["runout"]))

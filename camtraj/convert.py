@@ -21,7 +21,14 @@ from numpy.typing import NDArray
 
 import camtraj
 from camtraj import jsonsafe
-from camtraj.analysis import Analysis, Placement, axis_value, margins_summary, placement_text
+from camtraj.analysis import (
+    Analysis,
+    Placement,
+    axis_value,
+    camera_travel,
+    margins_summary,
+    placement_text,
+)
 from camtraj.errors import (
     InfeasibleError,
     InputError,
@@ -477,6 +484,12 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         "edge_peak_use": json.dumps({"runup": take.report.runup.get("peak_use", {}),
                                      "runout": take.report.runout.get("peak_use", {})},
                                     sort_keys=True),
+        # How far the run-up and run-out move [m] and turn [deg] the camera from the first and
+        # last frame's pose, for the report's run-up / run-out row.
+        "edge_camera_travel": json.dumps(
+            {side: {"m": m, "deg": math.degrees(rad)}
+             for side, (m, rad) in zip(("runup", "runout"), camera_travel(analysis),
+                                       strict=True)}, sort_keys=True),
         # With a lens only: its axes after the joints, their units and calibrated ranges.
         **({} if robot.lens is None else {"lens": json.dumps(robot.lens.describe())}),
         # With [controller.AXIS] units only: each axis's counts = offset + sign * scale * q
@@ -702,25 +715,6 @@ def summary(
         "timings": {k: round(v, 4) for k, v in analysis.timings.items()},
         "tool_version": camtraj.__version__,
     }
-
-
-def camera_travel(analysis: Analysis) -> list[tuple[float, float]]:
-    """How far the camera moves [m] and turns [rad] from its first frame's pose during the
-    run-up, and from its last frame's during the run-out, at most (a robot whose redundant
-    axes still move on a frame where the camera is at rest swings the camera around it:
-    ``--edges still``)."""
-    take, robot = analysis.take, analysis.robot
-    assert take is not None
-    out = []
-    for part, frame in ((slice(0, int(take.frame_samples[0]) + 1), int(take.frame_samples[0])),
-                        (slice(int(take.frame_samples[-1]), None), int(take.frame_samples[-1]))):
-        at = robot.camera_pose(take.q[part, :8])
-        here = robot.camera_pose(take.q[frame, :8])
-        moved = float(np.linalg.norm(at[:, :3, 3] - here[:3, 3], axis=1).max())
-        # the angle of each pose's rotation from the frame's: trace(R0^T R) = 1 + 2 cos
-        cos = (np.einsum("ij,kij->k", here[:3, :3], at[:, :3, :3]) - 1.0) / 2.0
-        out.append((moved, float(np.arccos(np.clip(cos, -1.0, 1.0)).max())))
-    return out
 
 
 def _move_to_start(analysis: Analysis) -> dict[str, Any]:

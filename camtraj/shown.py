@@ -14,9 +14,9 @@ from collections.abc import Callable, Iterable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "TABLE_MAX_SPEED", "distance", "edge_use", "frame_rate", "frame_runs",
-           "frame_span", "percent",
-           "scale_fit", "seconds", "servo", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "SHOWN_TURN_DEG", "TABLE_MAX_SPEED", "camera_moves", "distance",
+           "edge_use", "frame_rate", "frame_runs", "frame_span", "percent", "scale_fit", "seconds",
+           "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -59,6 +59,23 @@ def distance(metres: float) -> str:
     if metres < 0.01:
         return f"{metres * 1e3:.1f} mm"
     return f"{metres * 100:.1f} cm" if metres < 1.0 else f"{metres:.2f} m"
+
+
+#: [deg] The smallest turn of the camera in a run-up or run-out that is said (a pan alone
+#: moves the camera little, so its travel alone can look like nothing).
+SHOWN_TURN_DEG = 0.1
+
+
+def camera_moves(runup: tuple[float, float], runout: tuple[float, float]) -> str:
+    """How far the run-up and run-out move the camera from the first and last frame's pose,
+    each (metres, degrees): 'the camera moves 4.2 cm and turns 3.3 deg before the first frame,
+    0.0 mm after the last' (a turn from :data:`SHOWN_TURN_DEG`)."""
+
+    def part(metres: float, deg: float) -> str:
+        return distance(metres) + (f" and turns {deg:.1f} deg" if deg >= SHOWN_TURN_DEG else "")
+
+    return (f"the camera moves {part(*runup)} before the first frame, {part(*runout)} after "
+            "the last")
 
 
 def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:

@@ -632,6 +632,11 @@ def test_report_shows_the_run_up_and_run_out_use_the_terminal_prints(tmp_path: P
                 if ln.split() and ln.split()[0] in JOINT_NAMES}
     assert set(terminal) == set(JOINT_NAMES)
     assert any(v != "0%" for row in terminal.values() for v in row)  # something to compare
+    # and how far they move the camera around the first and last frame (gentle ends on a
+    # camera at rest there: the robot's axes already move, so it does move)
+    moves = re.search(r"the camera moves .* after the last", proc.stdout)
+    assert moves and "0.0 mm before" not in moves[0]
     for page in (html.read_text(encoding="utf-8"), again.read_text(encoding="utf-8")):
         assert "<th>run-up/run-out acceleration</th><th>run-up/run-out jerk</th>" in page
         assert _ends_cells(page) == terminal
+        assert moves[0] in page

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.analysis import placement_text
+from camtraj.analysis import camera_travel, placement_text
 from camtraj.errors import (
     InfeasibleError,
     InputError,
@@ -103,6 +103,8 @@ class ReportData:
         source: Where the data came from (the MCAP file, or "convert"/"check").
         margins: The terminal's margins, when the take is done.
         edges: The run-up's and run-out's own peak use, when they are planned.
+        edge_travel: How far the run-up and run-out move (m) and turn (deg) the camera from the
+            first and last frame's pose, when recorded.
     """
 
     shot: str
@@ -144,6 +146,9 @@ class ReportData:
     edges: dict[str, dict[str, dict[str, float]]] | None = None
     servo_step_ms: tuple[float, float] | None = None
     max_speed_set_by: str = ""  # what sets max_speed (TimingReport.set_by); "" unknown
+    # how far the run-up and run-out move [m] and turn [deg] the camera from the first / last
+    # frame's pose (analysis.camera_travel); None: not recorded (older files)
+    edge_travel: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     @property
     def has_take(self) -> bool:
@@ -301,6 +306,7 @@ def from_analysis(
             margins=None if path is None else margins_summary(analysis),
             edges={"runup": take.report.runup.get("peak_use", {}),
                    "runout": take.report.runout.get("peak_use", {})},
+            edge_travel=_degrees(camera_travel(analysis)),
         )
         return data
     frame_times = shot.times - shot.times[0]
@@ -453,6 +459,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         margins = json.loads(md["margins"]) if "margins" in md else None  # older files: none
         edges = json.loads(md["edge_peak_use"]) if "edge_peak_use" in md else None
         steps = json.loads(md["servo_step_ms"]) if "servo_step_ms" in md else None
+        travel = json.loads(md["edge_camera_travel"]) if "edge_camera_travel" in md else None
     except ValueError as exc:
         msg = f"{where} cannot be read ({exc})"
         raise InputError(msg) from None
@@ -463,6 +470,9 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         raise InputError(msg)
     if edges is not None and not _edges_ok(edges):
         msg = f"{where} edge_peak_use must map runup and runout to axis -> quantity -> number"
+        raise InputError(msg)
+    if travel is not None and not _travel_ok(travel):
+        msg = f"{where} edge_camera_travel must map runup and runout to m and deg (numbers >= 0)"
         raise InputError(msg)
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         msg = f"{where} warnings must be a list of texts"
@@ -512,6 +522,9 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         poses=poses, pose_frames=pose_frames, track=track, warnings=tuple(warnings),
         tolerance=MCAP_RTOL, source=str(source), margins=margins, edges=edges,
         servo_step_ms=None if steps is None else (float(steps[0]), float(steps[1])),
+        edge_travel=None if travel is None else (
+            (float(travel["runup"]["m"]), float(travel["runup"]["deg"])),
+            (float(travel["runout"]["m"]), float(travel["runout"]["deg"]))),
     )
     return _with_violations(data)
 
@@ -598,6 +611,19 @@ def _edges_ok(e: Any) -> bool:
                 isinstance(use, dict) and all(
                     isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
                     for v in use.values()) for use in side.values()) for side in e.values()))
+
+
+def _travel_ok(t: Any) -> bool:
+    return (isinstance(t, dict) and set(t) == {"runup", "runout"}
+            and all(isinstance(side, dict) and set(side) == {"m", "deg"} and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                and v >= 0.0 for v in side.values()) for side in t.values()))
+
+
+def _degrees(travel: list[tuple[float, float]]) -> tuple[tuple[float, float], tuple[float, float]]:
+    """analysis.camera_travel's (m, rad) per side as (m, deg)."""
+    (m0, r0), (m1, r1) = travel
+    return (m0, math.degrees(r0)), (m1, math.degrees(r1))
 
 
 def _float(text: str | None) -> float:

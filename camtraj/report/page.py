@@ -17,6 +17,7 @@ from camtraj.report.plots import COLORS, figures, limit_text
 from camtraj.report.samples import QUANTITIES
 from camtraj.shown import (
     EDGE_QUANTITIES,
+    camera_moves,
     edge_use,
     frame_rate,
     frame_span,
@@ -94,7 +95,9 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
     if data.has_take and s is not None:
         rows.append(("run-up / run-out",
                      f"{seconds(data.shot_start - s.start)} s / "
-                     f"{seconds(s.end - data.shot_end)} s"))
+                     f"{seconds(s.end - data.shot_end)} s"
+                     + ("" if data.edge_travel is None
+                        else "; " + camera_moves(*data.edge_travel))))
     else:
         rows.append(("run-up / run-out", "not planned: the shot itself cannot be done as asked"))
     return rows
