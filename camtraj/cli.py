@@ -690,7 +690,8 @@ def _report(r: dict[str, Any]) -> str:
                      "moving there, so the run-up/run-out swings the camera around "
                      f"{'it' if len(swung) == 1 else 'them'}: --edges still (the default) "
                      "keeps the robot still there, for a slower take")
-    if r.get("edges_asked") == "still" and r.get("edges") != "still":
+    if r.get("edges_asked") == "still" and not any(
+            part.get("camera_at_rest") for part in (r["runup"], r["runout"])):
         lines.append("  --edges still: the camera is at rest on neither end frame, so the "
                      "ends are as --edges gentle makes them")
     if r.get("collision"):

@@ -660,9 +660,13 @@ def summary(
     travel = camera_travel(analysis)
     resting = path.camera_rest  # as the solver decided it (for --edges still)
 
+    # as the file has them: from the take's start to the first frame and from the last frame
+    # to the take's end (the ruckig moves plus the holds that put the frames on servo ticks)
+    edge_time = (float(take.shot_start), float(take.t[-1] - take.shot_end))
+
     def extents(part: dict[str, Any], side: int) -> dict[str, Any]:
         return {
-            "duration_s": part.get("duration", 0.0),
+            "duration_s": edge_time[side],
             # how far the camera moves from the first (last) frame's position before (after)
             "camera_travel_m": travel[side][0],
             # and how far it turns [deg] (a pan alone moves it little)

@@ -505,6 +505,39 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     assert 0.85 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 
+def test_run_up_and_run_out_durations_are_the_files(runs: dict[str, Run]) -> None:
+    """The summary's run-up lasts from the take's first sample to the first frame's and its
+    run-out from the last frame's to the take's last (the ruckig moves plus the holds that
+    put the frames on servo ticks), as the decoded file has them (a new user found them up to
+    3.9 ms short: ruckig's move alone)."""
+    for key in ("crane_gentle", "crane_optimal", "whip_scale", "maya_dolly_push_in"):
+        take, data = runs[key].take(), runs[key].summary_json()
+        idx = frame_indices(take)
+        assert data["runup"]["duration_s"] == pytest.approx(take.t[idx[0]] - take.t[0],
+                                                            abs=1e-9), key
+        assert data["runout"]["duration_s"] == pytest.approx(take.t[-1] - take.t[idx[-1]],
+                                                             abs=1e-9), key
+
+
+def test_the_still_ends_fallback_note_needs_a_camera_moving_at_both_ends(
+        runs: dict[str, Run]) -> None:
+    """--edges still with the camera at rest on an end frame keeps the robot still there, even
+    where the ends fall back to full-limit ones (a lens axis with no room for a gentle run-up:
+    ``edges`` is then ``fast``); only a camera moving on both end frames makes the ends
+    gentle ones, and only then is that said (a new user read "at rest on neither end frame"
+    on a settled dolly zoom)."""
+    from camtraj.cli import _report
+
+    note = "the camera is at rest on neither end frame"
+    data = runs["crane_still"].summary_json()
+    assert data["runup"]["camera_at_rest"] and note not in _report(data)
+    assert note not in _report({**data, "edges": "fast"})
+    moving = {**data, "edges": "gentle",
+              "runup": {**data["runup"], "camera_at_rest": False},
+              "runout": {**data["runout"], "camera_at_rest": False}}
+    assert note in _report(moving)
+
+
 # --------------------------------------------------------------------------------------------
 # 4. The whip pan: too fast for shot timing, fine when scaled
 # --------------------------------------------------------------------------------------------
