@@ -9,7 +9,8 @@ Topics:
     /joint_trajectory   trajectory_msgs/msg/JointTrajectory  once at t = 0, every servo sample
     /shot/frames        camtraj_msgs/msg/ShotFrame        one per film frame, at its take time
     /robot_description  std_msgs/msg/String               once at t = 0 (URDF)
-    /tf                 tf2_msgs/msg/TFMessage            at the film frame rate (moving joints)
+    /tf                 tf2_msgs/msg/TFMessage            on every film frame, the take's ends,
+                                                          and the film rate between (moving joints)
     /tf_static          tf2_msgs/msg/TFMessage            once at t = 0 (fixed transforms, with
                                                           ``world`` -> ``base_link``: the placement)
     /camera/camera_info sensor_msgs/msg/CameraInfo        one per film frame (the lens, in
@@ -727,28 +728,37 @@ def interpolate_servo(t: Array, q: Array, qd: Array, times: ArrayLike) -> Array:
 
 
 def tf_times(take: TakeData) -> Array:
-    """The /tf sample times [s]: the film frame rate across the whole take.
+    """The /tf sample times [s]: every film frame's own stamp, the take's first and last
+    sample, and the film frame rate across the rest of the take.
 
-    The grid is anchored at the first shot frame (so every film frame of a shot timed at
-    the frame rate gets its own /tf sample) and runs from the take's first to last sample.
+    The grid is anchored at the first shot frame (a shot timed at the frame rate has its film
+    frames on it); a grid point within a quarter of a frame interval of a film frame or of
+    the take's ends gives way to it. So every film frame's pose is in /tf also when the take
+    is retimed (``scale`` slows it by a factor that is no whole number, ``optimal`` plays
+    frames faster than the film: one /tf sample in eight frames of a retimed push-in, and
+    `camtraj report` drew a frame's robot from another's), and so are the poses the take
+    starts and ends in.
     """
     start, end = float(take.t[0]), float(take.t[-1])
-    anchor = float(take.frame_times[0]) if len(take.frame_times) else start
-    # times on the file's nanosecond clock: a take that ends on its last film frame (no
-    # run-out) can end half a nanosecond before the grid's last point, which is that frame
+    ft = np.asarray(take.frame_times, dtype=float)
+    anchor = float(ft[0]) if ft.size else start
+    # the grid's sums can be a nanosecond off the frames' own stamps: points near a frame or
+    # an end go, and the frames and ends themselves are kept (the file's nanosecond clock can
+    # put a take that ends on its last film frame half a nanosecond before that frame)
     slack = 1e-6  # [frames]
     k_lo = -math.floor((anchor - start) * take.fps + slack)
     k_hi = math.floor((end - anchor) * take.fps + slack)
-    times = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
-    # the grid's film frames at the frames' own stamps: those are whole nanoseconds (the
-    # file's clock), and the grid's sums can be a nanosecond off them
-    ft = np.asarray(take.frame_times, dtype=float)
-    if ft.size:
-        after = np.searchsorted(ft, times).clip(0, ft.size - 1)
-        before = (after - 1).clip(0)
-        near = np.where(np.abs(ft[before] - times) < np.abs(ft[after] - times), before, after)
-        times = np.where(np.abs(ft[near] - times) <= 2e-9, ft[near], times)
-    out: Array = np.clip(times, start, end)
+    grid = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
+    ends = np.array([start, end])
+    if ft.size:  # an end on a film frame (no run-up or run-out) is that frame
+        ends = ends[np.abs(ends[:, None] - ft[[0, -1]]).min(axis=1) > 2e-9]
+    kept = np.sort(np.concatenate([ft, ends]))
+    after = np.searchsorted(kept, grid).clip(0, kept.size - 1)
+    before = (after - 1).clip(0)
+    gap = np.minimum(np.abs(kept[after] - grid), np.abs(kept[before] - grid))
+    times = np.concatenate([grid[gap > 0.25 / take.fps], kept])
+    times.sort()
+    out: Array = np.unique(np.clip(times, start, end))
     return out
 
 

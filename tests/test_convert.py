@@ -273,22 +273,33 @@ def test_frames_are_timed_as_the_shot(runs: dict[str, Run], key: str) -> None:
     assert take.t[-1] >= take.frame_times[-1] - 0.5e-9
 
 
-@pytest.mark.parametrize("key", ["maya_dolly_push_in", "crane_still", "crane_gentle"])
+@pytest.mark.parametrize("key", ["maya_dolly_push_in", "crane_still", "crane_gentle",
+                                 "whip_scale", "maya_optimal", "crane_optimal"])
 def test_every_film_frame_has_a_tf_sample_at_its_own_stamp(runs: dict[str, Run],
                                                           key: str) -> None:
-    """/tf is sampled at the film's frame rate through the whole take, one message on every
-    film frame's own stamp, the last frame too where the take ends on it (a settled end, no
-    run-out: the nanosecond clock put the take's end half a nanosecond before the grid's last
-    point, and /tf lost the last frame). Read with the mcap library's own reader."""
+    """/tf holds a message on every film frame's own stamp, the last frame too where the take
+    ends on it (a settled end, no run-out: the nanosecond clock put the take's end half a
+    nanosecond before the grid's last point, and /tf lost the last frame), also in a retimed
+    take (a new user found one /tf sample in eight frames of an optimal take), and on the
+    take's first and last sample; the rest of the take at about the film's frame interval
+    (a grid point within a quarter interval of a frame gives way to it: at most 1.25
+    intervals apart). Read with the mcap library's own reader."""
     from mcap.reader import make_reader
 
     with runs[key].mcap.open("rb") as stream:
         reader = make_reader(stream)
-        tf = {m.log_time for _s, _c, m in reader.iter_messages(topics=["/tf"])}
+        tf = sorted({m.log_time for _s, _c, m in reader.iter_messages(topics=["/tf"])})
         stream.seek(0)
         frames = [m.log_time for _s, _c, m in make_reader(stream).iter_messages(
             topics=["/shot/frames"])]
-    assert frames and all(t in tf for t in frames), sorted(set(frames) - tf)
+        stream.seek(0)
+        servo = [m.log_time for _s, _c, m in make_reader(stream).iter_messages(
+            topics=["/joint_states"])]
+    assert frames and set(frames) <= set(tf), sorted(set(frames) - set(tf))
+    assert tf[0] == servo[0] and tf[-1] == servo[-1]
+    fps = runs[key].summary_json()["fps"]
+    assert np.diff(tf).max() <= 1.25e9 / fps + 1
+    assert np.diff(tf).min() > 0
 
 
 # --------------------------------------------------------------------------------------------
