@@ -37,13 +37,25 @@ def frame_span(first: object, last: object, text: Callable[[Any], str] = str) ->
     return f"{a} to {b}" if negative else f"{a}-{b}"
 
 
+#: More runs of frames than this are shown as the first and last few and their count (a
+#: handheld shake over its jerk limits listed 35 runs per axis, over 1,000 characters on
+#: one line; check --json and the report keep every frame).
+SHOWN_RUNS = 8
+
+
 def frame_runs(runs: Iterable[tuple[int, int]]) -> str:
     """Runs of film frames (first, last): 'frames 12-19, 40' ('frames -3 to -1, 4'); one
-    frame alone: 'frame 40'."""
+    frame alone: 'frame 40'; more than :data:`SHOWN_RUNS` runs: the first five, '...', the
+    last two and the count ('frames 0-10, 12-16, 34-37, 39-50, 52-55, ..., 289-292,
+    295-299 (30 stretches)')."""
     runs = list(runs)
     if len(runs) == 1 and runs[0][0] == runs[0][1]:
         return f"frame {runs[0][0]}"
-    return "frames " + ", ".join(frame_span(a, b) if b != a else f"{a}" for a, b in runs)
+    shown = [frame_span(a, b) if b != a else f"{a}" for a, b in runs]
+    if len(shown) > SHOWN_RUNS:
+        return (f"frames {', '.join(shown[:5])}, ..., {', '.join(shown[-2:])} "
+                f"({len(shown)} stretches)")
+    return "frames " + ", ".join(shown)
 
 
 def seconds(x: float, digits: int = 2) -> str:

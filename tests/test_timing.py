@@ -204,6 +204,29 @@ def test_finite_differences_agree_with_reported_derivatives(limits: Limits) -> N
     assert np.max(np.abs(j_fd - take.qddd[a + 1 : b - 1]) / limits.jerk) < 1e-3
 
 
+def test_a_violation_in_several_stretches_names_the_frame_of_its_worst(
+        limits: Limits) -> None:
+    """Two rotate moves over the velocity limit, a small one first: the message lists both
+    stretches of frames and says the worst is in the second (a 540 deg orbit's track velocity
+    read as if at frames 2-4, the first of six stretches, where it was at frame 627)."""
+    vmax = float(limits.velocity[ROTATE])
+    t, small = bump_path(241, 1.2, vmax, 1.0, 2.0)
+    _, large = bump_path(241, 1.8, vmax, 6.0, 2.0)
+    q = small + large - small[0]
+    with pytest.raises(TimingLimitError) as info:
+        time_shot(q, t, limits, frame_numbers=np.arange(1, 242))
+    (viol,) = [v for v in info.value.violations if v.quantity == "velocity"]
+    assert len(viol.frames) == 2
+    assert viol.worst is not None
+    peak_frame = 1 + 24 * 7.0  # the large bump's peak: t = 6 + 2 / 2 s, 24 fps
+    assert viol.worst[0] <= peak_frame <= viol.worst[1] and viol.worst[1] - viol.worst[0] <= 1
+    assert viol.frames[1][0] <= viol.worst[0] <= viol.frames[1][1]
+    at = (f"worst at frame {viol.worst[0]}" if viol.worst[0] == viol.worst[1]
+          else f"worst between frames {viol.worst[0]} and {viol.worst[1]}")
+    assert str(info.value).startswith(f"rotate velocity 162 deg/s ({at}) exceeds 90.0 deg/s "
+                                      f"on frames {viol.frames[0][0]}-")
+
+
 def test_shot_velocity_violation_names_axis_frames_and_speed(limits: Limits) -> None:
     k, t0, width = 1.6, 1.0, 3.0
     vmax = float(limits.velocity[ROTATE])

@@ -126,6 +126,8 @@ class LimitViolation:
         frames: Runs of consecutive frames ``(first, last)`` (inclusive, film frame numbers)
             where the limit is exceeded. A servo sample between two frames counts for both.
         revolute: Whether the axis is revolute (for display in degrees).
+        worst: The film frames of the worst sample ``(first, last)``: one frame, or the two
+            it lies between (``None``: not known).
     """
 
     axis: str
@@ -135,6 +137,7 @@ class LimitViolation:
     ratio: float
     frames: tuple[tuple[int, int], ...]
     revolute: bool
+    worst: tuple[int, int] | None = None
 
     @property
     def speed_needed(self) -> float:
@@ -167,7 +170,13 @@ class LimitViolation:
         # "1.5 m/s^2 exceeds 1.5 m/s^2" reads as no violation: say by how much
         over = (self.ratio - 1.0) * 100.0  # [%]; below 0.01% the limit's own tolerance
         by = (f" by {over:.2g}%" if over >= 0.01 else " by under 0.01%") if peak == lim else ""
-        return f"{self.axis} {self.quantity} {peak} exceeds {lim}{by} on {self.frame_text}"
+        # where the worst is, when the frames are more than one stretch (a 540 deg orbit's
+        # track velocity read as if at frames 2-4, the first of six stretches: it was 627)
+        at = ""
+        if self.worst is not None and len(self.frames) > 1:
+            a, b = self.worst
+            at = f" (worst at frame {a})" if a == b else f" (worst between frames {a} and {b})"
+        return f"{self.axis} {self.quantity} {peak}{at} exceeds {lim}{by} on {self.frame_text}"
 
 
 class TimingLimitError(LimitError):
@@ -339,7 +348,7 @@ def violations_in(
             else:
                 lim = float(limits.bound(quantity)[j])
             touched = np.zeros(parts[0][1].numbers.size, dtype=bool)
-            ratio_k, peak = -math.inf, math.nan
+            ratio_k, peak, worst = -math.inf, math.nan, None
             for s, frame_map in parts:
                 values = getattr(s, field)[:, j]
                 ratio = (np.abs(values - mid) / half if quantity == "position"
@@ -350,12 +359,14 @@ def violations_in(
                 k = int(over[np.argmax(ratio[over])])
                 if ratio[k] > ratio_k:
                     ratio_k, peak = float(ratio[k]), float(values[k])
+                    worst = (int(frame_map.numbers[frame_map.lo[k]]),
+                             int(frame_map.numbers[frame_map.hi[k]]))
                 frame_map.touch(touched, over)
             if quantity == "position":
                 lim = float(limits.upper[j] if peak > limits.upper[j] else limits.lower[j])
             out.append(LimitViolation(
                 axis=limits.names[j], quantity=quantity, peak=peak, limit=lim, ratio=ratio_k,
-                frames=parts[0][1].spans(touched), revolute=bool(revolute[j]),
+                frames=parts[0][1].spans(touched), revolute=bool(revolute[j]), worst=worst,
             ))
     out.sort(key=lambda v: (v.quantity != "position", -v.speed_needed if
                             math.isfinite(v.speed_needed) else -v.ratio))
