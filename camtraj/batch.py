@@ -47,7 +47,7 @@ from typing import Any, Literal
 import click
 
 from camtraj import __version__, interrupts, jsonsafe
-from camtraj.errors import CamtrajError, InputError
+from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
 from camtraj.folders import check_can_make, make_parent
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
@@ -197,7 +197,8 @@ class ShotResult:
         cpu_seconds: CPU time of the conversion in [s] (0 when skipped).
         summary: The convert summary (read back from the summary file when skipped).
         warnings: What the shot's conversion warned, each naming the shot (said on stderr
-            when it converts now; a skipped shot's are its summary's, from the run that
+            when it converts now, and when it cannot be done as asked: what reading it
+            warned of is often why; a skipped shot's are its summary's, from the run that
             made it).
         earlier_output: For a failed shot, its MCAP path when a file is there from an
             earlier run (the batch removes nothing), else None.
@@ -390,6 +391,8 @@ def _convert_one(
         speed = getattr(exc, "max_speed", None)  # a take over its limits: how fast it can go
         if isinstance(speed, float) and math.isfinite(speed):
             outcome["summary"] = {"max_speed": speed}
+        if isinstance(exc, InfeasibleError):  # what reading the shot warned of is often why
+            outcome["warnings"] = _named(shot, [*held.texts, *exc.shot_warnings])
     except Exception as exc:  # a bug: report it as this shot's failure and go on
         outcome = {
             "status": "failed",
@@ -408,16 +411,21 @@ def _convert_one(
     else:
         # what the shot's reader logged, then the run's own warnings (the summary's, which
         # convert prints with its report), each once, naming the shot as the reader does
-        named = str(Path(shot))
-        said = [w if w.startswith(f"{named}: ") else f"{named}: {w}"
-                for w in [*held.texts, *summary.get("warnings", [])]]
-        outcome = {"status": "ok", "summary": summary, "warnings": list(dict.fromkeys(said))}
+        outcome = {"status": "ok", "summary": summary,
+                   "warnings": _named(shot, [*held.texts, *summary.get("warnings", [])])}
     finally:
         interrupts.ignore()
         logging.getLogger().removeHandler(held)
     outcome["seconds"] = time.perf_counter() - start
     outcome["cpu_seconds"] = time.process_time() - cpu_start
     return outcome
+
+
+def _named(shot: str, warnings: list[str]) -> list[str]:
+    """Each warning once, naming the shot as the reader's own do."""
+    named = str(Path(shot))
+    return list(dict.fromkeys(w if w.startswith(f"{named}: ") else f"{named}: {w}"
+                              for w in warnings))
 
 
 class _ShotWarnings(logging.Handler):
@@ -677,7 +685,7 @@ def run_batch(
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
-                    for text in result.warnings:  # a converted shot's, as convert's
+                    for text in result.warnings:  # as convert says them, failed or not
                         bar.write(text, file=sys.stderr)
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)
@@ -767,7 +775,8 @@ def batch_command(
             rig_layers=rig_layers,
         )
     except CamtrajError as exc:
-        click.echo(f"ERROR: {exc}", err=True)
+        for line in failure_lines(exc):
+            click.echo(line, err=True)
         ctx.exit(exc.exit_code)
     click.echo(report.table())
     for r in report.failed:

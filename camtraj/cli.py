@@ -27,9 +27,11 @@ from camtraj.analysis import DEFAULT_SOURCE, placement_text
 from camtraj.errors import (
     CamtrajError,
     CollisionError,
+    InfeasibleError,
     InputError,
     LensRangeError,
     UnreachableFramesError,
+    failure_lines,
     one_line,
 )
 from camtraj.options import (
@@ -58,9 +60,8 @@ EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
 
 
 def _fail(exc: CamtrajError) -> NoReturn:
-    click.echo(f"ERROR: {exc}", err=True)
-    for note in getattr(exc, "__notes__", []):
-        click.echo(f"note: {note}", err=True)
+    for line in failure_lines(exc):
+        click.echo(line, err=True)
     sys.exit(exc.exit_code)
 
 
@@ -331,16 +332,8 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
     try:
         options = _options(kw)
         result = run(shot, None, options, progress=progress, report=report)
-    except UnreachableFramesError as exc:
-        result = _unreachable_report(shot, exc, options)
-    except TimingLimitError as exc:
-        result = _limit_report(shot, exc, options)
-    except CollisionError as exc:
-        result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
-                  "phase": exc.phase, "link": exc.link, "prim": exc.prim,
-                  "distance_m": exc.distance, "clearance_m": exc.clearance}
-    except LensRangeError as exc:
-        result = {"status": "lens_range", "shot": shot, "message": str(exc)}
+    except (UnreachableFramesError, TimingLimitError, CollisionError, LensRangeError) as exc:
+        result = _failure_report(shot, exc, options)
     except CamtrajError as exc:
         progress.close()
         _fail(exc)
@@ -487,6 +480,26 @@ def _axes(table: dict[str, Any]) -> list[tuple[str, bool]]:
     return [*zip(JOINT_NAMES, REVOLUTE.tolist(), strict=True), *lens]
 
 
+def _failure_report(shot: str, exc: InfeasibleError, options: ConvertOptions | None,
+                    ) -> dict[str, Any]:
+    """check's report of a shot that cannot be done as asked, with what reading the shot
+    warned of (often the reason: a layer in other units puts the camera hundreds of metres
+    away)."""
+    from camtraj.timing import TimingLimitError
+
+    if isinstance(exc, UnreachableFramesError):
+        result = _unreachable_report(shot, exc, options)
+    elif isinstance(exc, TimingLimitError):
+        result = _limit_report(shot, exc, options)
+    elif isinstance(exc, CollisionError):
+        result = {"status": "collision", "shot": shot, "message": str(exc), "frame": exc.frame,
+                  "phase": exc.phase, "link": exc.link, "prim": exc.prim,
+                  "distance_m": exc.distance, "clearance_m": exc.clearance}
+    else:
+        result = {"status": "lens_range", "shot": shot, "message": str(exc)}
+    return {**result, "warnings": list(exc.shot_warnings)}
+
+
 def _unreachable_report(shot: str, exc: UnreachableFramesError,
                         options: ConvertOptions | None) -> dict[str, Any]:
     return {
@@ -599,6 +612,13 @@ def _by_axis(violations: list[dict[str, Any]]) -> list[str]:
 
 def _report(r: dict[str, Any]) -> str:
     """The human-readable report of a convert / check run."""
+    if r["status"] == "ok":
+        return _take_report(r)
+    return "\n".join([_failure_text(r), *(f"  warning: {w}" for w in r.get("warnings", []))])
+
+
+def _failure_text(r: dict[str, Any]) -> str:
+    """The report of a check that cannot be done as asked (its warnings apart)."""
     if r["status"] == "unreachable":
         lines = [f"{r['shot']}: CANNOT BE REACHED", f"  {r['message']}", "  frame  misses by"]
         for u in r["unreachable"]:
@@ -632,6 +652,12 @@ def _report(r: dict[str, Any]) -> str:
                          + (f", set by {r['max_speed_set_by']}" if r.get("max_speed_set_by")
                             else "") + advice)
         return "\n".join(lines)
+    msg = f"internal error: no report for status {r['status']!r}"
+    raise AssertionError(msg)
+
+
+def _take_report(r: dict[str, Any]) -> str:
+    """The report of a run that made a take (convert, or a feasible check)."""
     fr = r["frames"]
     lines = [
         f"{r['shot']}  camera {r['camera']}  frames {frame_span(fr['first'], fr['last'])} "
@@ -684,12 +710,20 @@ def _report(r: dict[str, Any]) -> str:
                                                or part.get("camera_turn_deg", 0.0)
                                                > SWING_NOTE_DEG)
              and not part.get("from_start_pose")]
-    if swung and r.get("edges") != "still":
+    if swung and r.get("edges_asked", r.get("edges")) != "still":
         where = " and ".join(f"frame {frame}" for frame, _ in swung)
         lines.append(f"  the camera is still on {where} but the robot's axes are already "
                      "moving there, so the run-up/run-out swings the camera around "
                      f"{'it' if len(swung) == 1 else 'them'}: --edges still (the default) "
                      "keeps the robot still there, for a slower take")
+    hard = [frame for frame, part in swung if part.get("camera_rest") == "at_rest"]
+    if hard and r.get("edges_asked", r.get("edges")) == "still":
+        where = " and ".join(f"frame {frame}" for frame in hard)
+        lines.append(f"  the camera stops hard on {where}: still there but accelerating (a "
+                     "cubic ease, a move from standstill), so the run-up/run-out carries the "
+                     "robot past the frame and back, swinging the camera around it; a smooth "
+                     "(quintic) ease settles with no run-up at all, and --timing optimal "
+                     "starts and ends such a move at a tenth of its pace")
     if r.get("edges_asked") == "still" and not any(
             part.get("camera_at_rest") for part in (r["runup"], r["runout"])):
         lines.append("  --edges still: the camera is at rest on neither end frame, so the "

@@ -274,6 +274,19 @@ def analyse(
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
         on_start(analysis)
+    try:
+        _solve_and_time(analysis, shot_path, options, start, progress)
+    except InfeasibleError as exc:  # what reading the shot warned of is often why
+        exc.shot_warnings = tuple(shot.warnings)
+        raise
+    return analysis
+
+
+def _solve_and_time(analysis: Analysis, shot_path: str | Path, options: ConvertOptions,
+                    start: Array | None, progress: Progress) -> None:
+    """:func:`analyse`'s IK, timing and collision stages, filling in ``analysis``."""
+    shot, robot, targets, timings = (analysis.shot, analysis.robot, analysis.targets,
+                                     analysis.timings)
     if robot.lens is not None:  # a frame beyond the lens's calibration is an error up front
         from camtraj.lens import lens_positions
 
@@ -319,13 +332,12 @@ def analyse(
 
         clearance = set_file.clearance_m if options.clearance is None else options.clearance
         with _stage(timings, "collision"):
-            closest = check_take(shot_path, robot, placement.base2world, analysis.take,
+            closest = check_take(shot_path, robot, analysis.placement.base2world, analysis.take,
                                  shot.time_codes, set_file.prims, clearance,
                                  floor_z=set_file.floor_height * shot.meters_per_unit)
         analysis.collision = {"prims": list(set_file.prims), "clearance_m": clearance,
                               "closest_m": closest if math.isfinite(closest) else None,
                               "measured_within_m": clearance + NEAR}
-    return analysis
 
 
 def convert(

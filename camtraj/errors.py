@@ -48,9 +48,16 @@ class ShotFileError(InputError):
 
 
 class InfeasibleError(CamtrajError):
-    """The shot cannot be done as asked (unreachable frames, limits exceeded)."""
+    """The shot cannot be done as asked (unreachable frames, limits exceeded).
+
+    Attributes:
+        shot_warnings: What reading the shot warned of (a layer in other units, a focal length
+            no lens has): often the cause, so said with the failure too (set by
+            :func:`camtraj.convert.analyse`).
+    """
 
     exit_code = 3
+    shot_warnings: tuple[str, ...] = ()
 
 
 class UnreachableError(InfeasibleError):
@@ -161,3 +168,11 @@ def _frame_ranges(frames: list[int]) -> str:
 def frame_ranges(frames: list[int]) -> str:
     """Public form of the frame-range formatter, for reports."""
     return _frame_ranges(frames)
+
+
+def failure_lines(exc: CamtrajError) -> list[str]:
+    """What a command prints on stderr when it stops on ``exc``: the error, its notes (what
+    to try), and what reading the shot warned of (often the reason)."""
+    return [f"ERROR: {exc}",
+            *(one_line(f"note: {note}") for note in getattr(exc, "__notes__", [])),
+            *(one_line(f"warning: {w}") for w in getattr(exc, "shot_warnings", ()))]

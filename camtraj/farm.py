@@ -62,7 +62,7 @@ import click
 
 from camtraj import __version__, jsonsafe
 from camtraj.batch import output_names
-from camtraj.errors import CamtrajError, InputError
+from camtraj.errors import CamtrajError, InputError, failure_lines
 from camtraj.folders import check_can_make
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
@@ -823,7 +823,8 @@ def export_command(
             )
             click.echo(f"wrote {path} and {manifest} (frames 1-{len(shots)}, one per shot)")
     except CamtrajError as exc:
-        click.echo(f"ERROR: {exc}", err=True)
+        for line in failure_lines(exc):
+            click.echo(line, err=True)
         ctx.exit(exc.exit_code)
 
 
@@ -839,7 +840,8 @@ def run_task_command(ctx: click.Context, manifest: str, index: int) -> None:
     try:
         result = run_task(manifest, index)
     except CamtrajError as exc:
-        click.echo(f"ERROR: {exc}", err=True)
+        for line in failure_lines(exc):
+            click.echo(line, err=True)
         ctx.exit(exc.exit_code)
     click.echo(f"camtraj {__version__}, task {index}: {result.get('shot')}: "
                f"{result.get('status')}, wrote {result.get('output')}")

@@ -33,7 +33,13 @@ import click
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.errors import CamtrajError, InputError, PlacementError, UnreachableFramesError
+from camtraj.errors import (
+    CamtrajError,
+    InfeasibleError,
+    InputError,
+    PlacementError,
+    UnreachableFramesError,
+)
 from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.inputs import one_line
 from camtraj.options import EDGE_OPTIONS, TIMING_MODES, timing_edges
@@ -740,6 +746,9 @@ def place(
         layouts, screened, region = search(runner, (0,), sf,
                                            meters_per_unit=shot.meters_per_unit,
                                            up_axis=shot.up_axis, top=top)
+    except InfeasibleError as exc:  # what reading the shot warned of is often why
+        exc.shot_warnings = tuple(shot.warnings)
+        raise
     finally:
         runner.close()
     return PlaceReport(str(shot_path), problem.base_z, [lay.results[0] for lay in layouts],
@@ -833,7 +842,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
     """
     import json
 
-    from camtraj.errors import CamtrajError
+    from camtraj.errors import CamtrajError, failure_lines
     from camtraj.inputs import files_read
     from camtraj.options import ConvertOptions, _parse_frames
     from camtraj.outputs import OutputSet
@@ -882,7 +891,8 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                              edges=edges)
                 return
         except CamtrajError as exc:
-            click.echo(f"ERROR: {exc}", err=True)
+            for line in failure_lines(exc):
+                click.echo(line, err=True)
             ctx.exit(exc.exit_code)
         click.echo(json.dumps(report.to_json(), indent=2) if as_json else table(report))
         best = report.best
@@ -899,13 +909,14 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
 
 
 def _write(ctx: click.Context, outputs: Any, output: str, text: str, as_json: bool) -> None:
-    from camtraj.errors import CamtrajError
+    from camtraj.errors import CamtrajError, failure_lines
 
     try:
         outputs.write_bytes(output, text.encode("utf-8"))
         outputs.commit()
     except CamtrajError as exc:
-        click.echo(f"ERROR: {exc}", err=True)
+        for line in failure_lines(exc):
+            click.echo(line, err=True)
         ctx.exit(exc.exit_code)
     if not as_json:
         click.echo(f"  wrote {output}")

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from camtraj.errors import InputError, PlacementError
+from camtraj.errors import InfeasibleError, InputError, PlacementError
 from camtraj.inputs import (
     one_line,
     parse_toml,
@@ -222,11 +222,13 @@ def place_scene(
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
     problems: list[Problem] = []
     units: list[tuple[float, str]] = []
+    warned: list[str] = []  # what reading each shot warned of, said with a failure
     for s, opt in zip(shots, options, strict=True):
         problem, shot = load_problem(s.path, opt, rob, sf, clearance=clearance, rate=rate,
                                      timing=s.timing)
         problems.append(problem)
         units.append((shot.meters_per_unit, shot.up_axis))
+        warned += [f"{s.name}: {w}" for w in shot.warnings]
     if len(set(units)) > 1:
         seen = ", ".join(f"{s.name} {u[0]:g} m per unit {u[1]}-up"
                          for s, u in zip(shots, units, strict=True))
@@ -272,6 +274,9 @@ def place_scene(
             elif split is None:
                 msg = _no_split(shots, group_search, cheap)
                 raise PlacementError(msg)
+    except InfeasibleError as exc:  # what reading the shots warned of is often why
+        exc.shot_warnings = tuple(warned)
+        raise
     finally:
         runner.close()
     return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,

@@ -276,8 +276,9 @@ def test_a_bad_shared_file_is_one_error_before_any_shot_runs(tmp_path: Path,
 
 
 def test_a_shots_warnings_are_said_only_when_it_converts(tmp_path: Path) -> None:
-    """As convert: a converted shot's warnings go to stderr, a failed shot says only its
-    ERROR line (a shot with no camera also printed its missing-metersPerUnit warning)."""
+    """As convert: a converted shot's warnings go to stderr, a shot that fails on its input
+    says only its ERROR line (a shot with no camera also printed its missing-metersPerUnit
+    warning; one that cannot be done as asked says them: test_cli)."""
     text = (SAMPLES / "maya_dolly_push_in.usda").read_text()
     assert "metersPerUnit = 0.01" in text
     unit_less = text.replace("metersPerUnit = 0.01", "")  # USD's fallback: centimetres too

@@ -576,3 +576,99 @@ def test_one_frame_alone_is_a_frame_not_frames() -> None:
     assert frame_runs([(1001, 1001)]) == "frame 1001"
     assert frame_runs([(12, 19), (40, 40)]) == "frames 12-19, 40"
     assert frame_runs([(-3, -1)]) == "frames -3 to -1"
+    # many stretches (a handheld shake over its jerk limit: 35 of them, 1,166 characters on
+    # one ERROR line): the first five, the last two and how many
+    eight = [(10 * i, 10 * i + 2) for i in range(8)]
+    assert frame_runs(eight) == "frames " + ", ".join(f"{a}-{b}" for a, b in eight)
+    nine = [*eight, (90, 90)]
+    assert frame_runs(nine) == "frames 0-2, 10-12, 20-22, 30-32, 40-42, ..., 70-72, 90 " \
+                               "(9 stretches)"
+
+
+def test_a_failure_says_what_reading_the_shot_warned_of(tmp_path: Path) -> None:
+    """A camera animated in a centimetre layer under a metre stage is read 100x too far (USD
+    converts no units across a sublayer): every command that then fails (unreachable, no
+    placement) says the reader's warning naming that layer with its error, where it used to
+    say it only on success (a new user got "out of reach by 596 m" and advice to run place)."""
+    anim = Usd.Stage.CreateNew(str(tmp_path / "anim_cm.usda"))
+    UsdGeom.SetStageMetersPerUnit(anim, 0.01)
+    UsdGeom.SetStageUpAxis(anim, UsdGeom.Tokens.z)
+    cam = UsdGeom.Camera.Define(anim, "/cam")
+    cam.CreateFocalLengthAttr(35.0)
+    op = cam.AddTranslateOp()
+    for f in range(1, 13):
+        op.Set(Gf.Vec3d(500.0 + 10.0 * f, 0.0, 140.0), f)  # cm: 5 m ahead, 1.4 m up
+    anim.GetRootLayer().Save()
+    stage = Usd.Stage.CreateNew(str(tmp_path / "shot_m.usda"))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(12)
+    stage.SetTimeCodesPerSecond(24)
+    stage.SetFramesPerSecond(24)
+    stage.GetRootLayer().subLayerPaths.append("anim_cm.usda")
+    stage.GetRootLayer().Save()
+    shot = tmp_path / "shot_m.usda"
+    said = "anim_cm.usda, written with metersPerUnit 0.01 (the stage's: 1)"
+    procs = run_all({
+        "convert": ["convert", shot, "-o", tmp_path / "x.mcap"],
+        "check": ["check", shot],
+        "json": ["check", shot, "--json"],
+        "place": ["place", shot, "-o", tmp_path / "placed.toml"],
+        "batch": ["batch", shot, "-o", tmp_path / "batch"],
+    })
+    for key, proc in procs.items():
+        assert proc.returncode == 3, (key, proc.stderr)
+    assert "cannot be reached" in procs["convert"].stderr
+    assert re.search(r"^warning: .*" + re.escape(said), procs["convert"].stderr, re.M)
+    assert re.search(r"^  warning: .*" + re.escape(said), procs["check"].stdout, re.M)
+    assert any(said in w for w in json.loads(procs["json"].stdout)["warnings"])
+    assert re.search(r"^warning: .*" + re.escape(said), procs["place"].stderr, re.M)
+    assert re.search(re.escape(said), procs["batch"].stderr)
+    report = json.loads((tmp_path / "batch" / "batch_report.json").read_text())
+    assert any(said in w for w in report["shots"][0]["warnings"])
+    assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "placed.toml").exists()
+
+
+def _truck_stage(path: Path, ease: Any) -> Path:
+    """A Z-up metre stage: the camera trucks 3 m along x over 60 frames at 30 fps, eased by
+    ``ease`` (0..1 -> 0..1), looking across the track."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(60)
+    stage.SetTimeCodesPerSecond(30)
+    stage.SetFramesPerSecond(30)
+    cam = UsdGeom.Camera.Define(stage, "/cam")
+    cam.CreateFocalLengthAttr(35.0)
+    move = cam.AddTranslateOp()
+    cam.AddRotateXYZOp().Set(Gf.Vec3f(80.0, 0.0, 0.0))  # looking along -y, tilted down 10 deg
+    for f in range(1, 61):
+        move.Set(Gf.Vec3d(3.0 + 3.0 * float(ease((f - 1) / 59.0)), 1.5, 1.5), f)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_a_camera_that_stops_hard_is_said_to_swing_around_its_end_frames(
+        tmp_path: Path) -> None:
+    """Still ends keep the robot still on a frame where the camera is at rest, but a cubic
+    ease is still accelerating there: the run-up must build that acceleration and carries the
+    robot past the frame and back. check says so next to how far the camera moves (a new
+    user read the swing without the reason); a quintic ease settles, with neither."""
+    procs = run_all({
+        "cubic": ["check", _truck_stage(tmp_path / "cubic.usda",
+                                        lambda u: 3 * u ** 2 - 2 * u ** 3)],
+        "quintic": ["check", _truck_stage(tmp_path / "quintic.usda",
+                                          lambda u: u ** 3 * (10 - 15 * u + 6 * u ** 2))],
+    })
+    for proc in procs.values():
+        assert proc.returncode == 0, proc.stderr
+    note = "the camera stops hard on frame 1 and frame 60: still there but accelerating"
+    moved = re.search(r"the camera moves ([0-9.]+) (mm|cm) .*before the first frame",
+                      procs["cubic"].stdout)
+    assert moved and float(moved[1]) * (10.0 if moved[2] == "cm" else 1.0) > 1.0
+    assert note in procs["cubic"].stdout
+    assert note not in procs["quintic"].stdout
+    assert ("the camera moves 0.0 mm before the first frame, 0.0 mm after the last"
+            in procs["quintic"].stdout)

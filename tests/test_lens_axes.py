@@ -296,7 +296,7 @@ def test_a_focal_length_beyond_the_lens_is_an_error_at_that_frame(
     proc = run_cli("check", dolly["shot"], "--lens", short, "--json")
     assert proc.returncode == 3, proc.stderr
     assert json.loads(proc.stdout) == {"status": "lens_range", "shot": str(dolly["shot"]),
-                                       "message": line.strip()}
+                                       "message": line.strip(), "warnings": []}
     proc = run_cli("convert", dolly["shot"], "-o", dolly["folder"] / "short.mcap", "--lens",
                    short)
     assert proc.returncode == 3 and line.strip() in error_line(proc), proc.stderr
