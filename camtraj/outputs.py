@@ -443,7 +443,9 @@ class OutputSet:
                         out.named.unlink()
                     out.named = None
             if not self._committed:  # a failed run leaves no empty folder behind
-                for folder in self._made_folders:
+                # deepest first across outputs too: --summary's a/b/ is made after -o's a/
+                for folder in sorted(self._made_folders, key=lambda f: len(f.parts),
+                                     reverse=True):
                     with contextlib.suppress(OSError):
                         folder.rmdir()
             self._made_folders = []

@@ -164,6 +164,13 @@ def test_missing_folders_are_made_and_removed_again_when_nothing_is_written(
         outputs.add(tmp_path / "new" / "deeper" / "x.mcap", "-o")
         assert (tmp_path / "new" / "deeper").is_dir()
     assert list(tmp_path.iterdir()) == []  # the run wrote nothing: no empty folders either
+    # a second output deeper in the first's new folder (-o a/x.mcap --summary a/b/x.json):
+    # its folder is removed before the first's (a new user found a/ left behind)
+    with OutputSet() as outputs:
+        outputs.add(tmp_path / "a" / "x.mcap", "-o")
+        outputs.add(tmp_path / "a" / "b" / "x.json", "--summary")
+        outputs.add(tmp_path / "c" / "x.html", "--report")
+    assert list(tmp_path.iterdir()) == []
     with OutputSet() as outputs:
         outputs.add(tmp_path / "new" / "x.mcap", "-o")
         outputs.write_bytes(tmp_path / "new" / "x.mcap", b"data")
