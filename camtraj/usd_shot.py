@@ -419,6 +419,14 @@ def _read(
             what = "finite or infinite" if name == "focusDistance" else "finite"
             msg = f"{path}: camera {cam_path} has no {what} {name} {_where(frame_numbers, bad)}"
             raise ShotFileError(msg)
+        if name in _SIGN_RULES:  # a negative length or stop is a broken export, not a lens
+            positive, meaning = _SIGN_RULES[name]
+            bad = values <= 0.0 if positive else values < 0.0
+            if bad.any():
+                first = float(values[np.flatnonzero(bad)[0]])
+                msg = (f"{path}: camera {cam_path} has {name} {first:g} "
+                       f"{_where(frame_numbers, bad)}: {meaning}")
+                raise ShotFileError(msg)
         lens[name] = values
 
     # Tenths of a scene unit -> scene units (/10) -> metres (*mpu) -> millimetres (*1000).
@@ -1120,6 +1128,17 @@ def _shear_warning(
         f"direction differs from the orthonormalised pose the robot follows by up to "
         f"{angle:.1f} deg (frame {int(frames[worst])})"
     )
+
+
+#: The camera attributes whose sign means something: (must be above zero, else at least
+#: zero; what a value there means).
+_SIGN_RULES = {
+    "focalLength": (True, "a focal length is above zero"),
+    "focusDistance": (False, "a focus distance is zero (unset) or more"),
+    "fStop": (False, "an f-stop is zero (unset) or more"),
+    "horizontalAperture": (True, "a film back is above zero"),
+    "verticalAperture": (True, "a film back is above zero"),
+}
 
 
 def _where(frames: NDArray[np.int64], bad: ArrayLike) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import logging
 import math
+import re
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -851,3 +852,31 @@ def test_a_set_layer_in_other_units_that_does_not_move_the_camera_is_not_named(
         op.Set(Gf.Vec3d(0.1 * f, 0.0, 1.5), f)
     shot = read_shot(_save(stage))
     assert not [w for w in shot.warnings if "set_cm.usda" in w], shot.warnings
+
+
+@pytest.mark.parametrize(("attr", "value", "meaning"), [
+    ("focalLength", -0.35, "a focal length is above zero"),
+    ("focalLength", 0.0, "a focal length is above zero"),
+    ("focusDistance", -2.0, "a focus distance is zero (unset) or more"),
+    ("fStop", -2.8, "an f-stop is zero (unset) or more"),
+    ("horizontalAperture", -3.6, "a film back is above zero"),
+])
+def test_a_lens_value_of_the_wrong_sign_is_bad_input(tmp_path: Path, attr: str, value: float,
+                                                     meaning: str) -> None:
+    """A negative focal length, focus distance, f-stop or film back on some frames is a
+    broken export: an input error naming the frames, as NaN is (a new user's negative
+    focal length converted with exit 0 into a camera_info with fx = -1867)."""
+    stage = _new_stage(tmp_path / "sign.usda", frames=(1, 12))
+    cam = UsdGeom.Camera.Define(stage, "/cam")
+    cam.AddTranslateOp().Set(Gf.Vec3d(1.0, 0.0, 1.5))
+    good = {"focalLength": 0.35, "focusDistance": 3.0, "fStop": 2.8,
+            "horizontalAperture": 0.36}[attr]
+    prop = cam.GetPrim().GetAttribute(attr)
+    for f in range(1, 13):
+        prop.Set(value if f >= 10 else good, f)
+    with pytest.raises(ShotFileError, match=re.escape(
+            f"has {attr} {value:g} at frame 10 (3 frames in all: frames 10-12): {meaning}")):
+        read_shot(_save(stage))
+    for f in range(10, 13):  # zero is "unset" for focus and stop, and reads
+        prop.Set(0.0 if attr in ("focusDistance", "fStop") else good, f)
+    read_shot(_save(stage))
