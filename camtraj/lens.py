@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.errors import InputError, LensFileError, LensRangeError
+from camtraj.errors import InputError, LensFileError, LensRangeError, frame_ranges
 from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
 from camtraj.robot import CONTROLLER_KEYS, ControllerUnits, controller_units
 
@@ -301,6 +301,12 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
         if axis.name != "zoom" and not np.any(x):
             out[:, i] = axis.home
             continue
+        if axis.name != "zoom" and not np.all(x):  # unset (0) on some frames only
+            unset = [int(f) for f in shot.frames[x == 0.0]]
+            msg = (f"{QUANTITY[axis.name]} is unset (0) on {frame_ranges(unset)} but set on the "
+                   f"others: the {axis.name} motor needs a value on every frame (set it on "
+                   f"every frame, or on none to hold the motor at its home)")
+            raise InputError(msg)
         cal = axis.calibration
         low = x < cal.low * (1.0 - RANGE_RTOL)
         high = x > cal.high * (1.0 + RANGE_RTOL)
@@ -313,8 +319,10 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
             read = (f" (the shot's fStop {float(x[k]):.3g})"
                     if axis.name == "iris" and axis.unit == "T-stop" else "")
             shown = _show(axis.name, float(x[k]), axis.unit)
+            also = ("" if bad.size == 1 else
+                    f" (outside on {frame_ranges([int(f) for f in shot.frames[bad]])})")
             msg = (f"{QUANTITY[axis.name]} {shown}{read} at frame "
-                   f"{int(shot.frames[k])} is {side} the lens's "
+                   f"{int(shot.frames[k])}{also} is {side} the lens's "
                    f"{_show(axis.name, end, axis.unit)} ({lens.name} covers "
                    f"{_show(axis.name, cal.low, axis.unit)} to "
                    f"{_show(axis.name, cal.high, axis.unit)}; lens file {lens.source})")
@@ -376,10 +384,17 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
         driven = lens.axis(axis)
         if driven is not None and not np.any(x):  # USD's "not authored": the motor holds home
             cal = driven.calibration
-            home = float(cal.value(np.array([driven.home]))[0])
-            at_inf = bool(np.isinf(cal.quantity[-1])) and abs(driven.home - cal.motor[-1]) < 1e-9
-            shown = (_show(axis, home, driven.unit) if math.isfinite(home) and not at_inf
-                     else "infinity")
+            lo, hi = float(np.min(cal.motor)), float(np.max(cal.motor))
+            if not lo - 1e-9 <= driven.home <= hi + 1e-9:  # no lens value there: say where
+                end = lo if driven.home < lo else hi
+                shown = (f"{math.degrees(driven.home):.2f} deg, outside its calibration, "
+                         f"which ends at {math.degrees(end):.2f} deg")
+            else:
+                home = float(cal.value(np.array([driven.home]))[0])
+                at_inf = (bool(np.isinf(cal.quantity[-1]))
+                          and abs(driven.home - cal.motor[-1]) < 1e-9)
+                shown = (_show(axis, home, driven.unit) if math.isfinite(home) and not at_inf
+                         else "infinity")
             out.append(
                 f"the shot does not set its {what}: the {axis} motor holds at its home "
                 f"({shown}, lens file {lens.source})")

@@ -280,7 +280,9 @@ def test_a_focal_length_beyond_the_lens_is_an_error_at_that_frame(
                        "[240.0, 109.0], [290.0, 120.0],", "")
     assert Lens.from_toml(short).axis("zoom").calibration.high == 50.0  # type: ignore[union-attr]
     usd = dolly["usd"]
-    first = int(usd["frames"][np.flatnonzero(usd["focal_mm"] > 50.0 * (1 + 1e-6))[0]])
+    beyond = usd["frames"][usd["focal_mm"] > 50.0 * (1 + 1e-6)]
+    first, last = int(beyond[0]), int(beyond[-1])
+    assert np.array_equal(beyond, np.arange(first, last + 1))  # one stretch, the dolly's end
     # check reports it as it reports any shot it cannot do: on stdout, in the HTML report,
     # and as JSON
     page = dolly["folder"] / "short.html"
@@ -288,7 +290,8 @@ def test_a_focal_length_beyond_the_lens_is_an_error_at_that_frame(
     assert proc.returncode == 3, proc.stderr
     head, line = proc.stdout.splitlines()
     assert head == f"{dolly['shot']}: OUTSIDE THE LENS'S RANGE", proc.stdout
-    assert f"at frame {first} is beyond the lens's 50 mm" in line, line
+    assert (f"at frame {first} (outside on frames {first}-{last}) is beyond the lens's 50 mm"
+            in line), line
     assert re.search(r"focal length 5\d\.\d+ mm at frame", line), line
     text = html.unescape(page.read_text(encoding="utf-8"))
     assert f"OUTSIDE THE LENS'S RANGE: {line.strip()}" in text

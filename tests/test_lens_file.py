@@ -19,7 +19,7 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 
 from camtraj import Robot
-from camtraj.errors import LensFileError, LensRangeError, RobotFileError
+from camtraj.errors import InputError, LensFileError, LensRangeError, RobotFileError
 from camtraj.lens import LENS_AXES, Lens, commanded_lens, lens_positions, lens_warnings
 from tests.test_convert import ROOT, SHOTS, error_line, run_cli
 
@@ -215,6 +215,47 @@ def test_unset_focus_and_stop_hold_at_home(tmp_path: Path) -> None:
         f"(infinity, lens file {path})",
         f"the shot does not set its f-stop: the iris motor holds at its home (T2.8, lens file "
         f"{path})"]
+
+
+def test_a_home_outside_the_calibration_is_said_as_a_motor_angle(tmp_path: Path) -> None:
+    """A home past the table's end (focus at 302 deg, the infinity mark at 300; iris at -1,
+    the table from 0) has no lens value: the warning says the motor angle and where the
+    table ends, not the table's end value (a new user read "holds at infinity" and "T2.8"
+    for motors commanded elsewhere)."""
+    path = tmp_path / "lens.toml"
+    text = ZOOM_TEXT.replace("max_jerk = 7200.0", "max_jerk = 7200.0\nhome = 302.0")
+    path.write_text(text.replace("max_jerk = 1200.0", "max_jerk = 1200.0\nhome = -1.0"),
+                    encoding="utf-8")
+    lens = Lens.from_toml(path)
+    shot = _shot([35.0, 50.0], [0.0, 0.0], [0.0, 0.0])
+    q = lens_positions(lens, shot)
+    assert np.degrees(q[:, 1]).tolist() == pytest.approx([302.0, 302.0])
+    assert np.degrees(q[:, 2]).tolist() == pytest.approx([-1.0, -1.0])
+    assert lens_warnings(lens, shot) == [
+        "the shot does not set its focus distance: the focus motor holds at its home (302.00 "
+        f"deg, outside its calibration, which ends at 300.00 deg, lens file {path})",
+        "the shot does not set its f-stop: the iris motor holds at its home (-1.00 deg, "
+        f"outside its calibration, which ends at 0.00 deg, lens file {path})"]
+
+
+def test_a_focus_unset_on_some_frames_only_is_bad_input() -> None:
+    """Focus distance 0 (unset) on some frames and set on others: the motor needs a value on
+    every frame, and the error says that (it had said "0 m is nearer than the lens's
+    0.6 m", exit 3)."""
+    with pytest.raises(InputError, match=r"^focus distance is unset \(0\) on frames 101-102 "
+                                         r"but set on the others") as info:
+        lens_positions(Lens.from_toml(ZOOM), _shot([30.0] * 4, [0.0, 0.0, 2.0, 2.0],
+                                                   [4.0] * 4))
+    assert info.value.exit_code == 2
+
+
+def test_every_frame_beyond_the_table_is_named() -> None:
+    """The frames outside the table, all of them, with the first one's value (a new user
+    had to re-run for each)."""
+    with pytest.raises(LensRangeError, match=r"focus distance 0.5 m at frame 102 \(outside "
+                                             r"on frames 102-103, 105\) is nearer than"):
+        lens_positions(Lens.from_toml(ZOOM), _shot([30.0] * 5, [2.0, 0.5, 0.4, 2.0, 0.5],
+                                                   [4.0] * 5))
 
 
 @pytest.mark.parametrize(

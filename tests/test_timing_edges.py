@@ -160,6 +160,24 @@ def towards_limit(axis: int, n: int, gap: float, speed: float, side: int) -> tup
     return t, q
 
 
+def test_a_lens_motor_on_its_limit_moving_into_it_is_told_to_ease_or_widen(
+        limits: Limits) -> None:
+    """A lens motor, not a joint, on its limit and moving into it on the last frame: the
+    advice is the lens's (ease the pull out to rest there, or set the motor's limit past
+    it), not the IK's, which does not drive a lens (a new user's focus pull)."""
+    focus = Limits(np.zeros(1), np.radians([300.0]), np.radians([180.0]),
+                   np.radians([720.0]), np.radians([7200.0]), names=("focus",),
+                   kinds=("revolute",))
+    both = limits.joined(focus)
+    t = np.arange(24) / FPS
+    q = np.tile(np.concatenate([HOME, [0.0]]), (24, 1))
+    q[:, 8] = 0.5 * (t[-1] - t)  # the focus ring turns down onto its lower limit, 0 deg
+    with pytest.raises(TimingLimitError, match=r"focus is 0 deg from its lower limit 0 deg "
+                       r"and moves towards it there; ease the focus move out to rest there, or "
+                       r"set the motor's limit past it in the lens file"):
+        time_shot(q, t, both, mode="scale")
+
+
 NEAR_LIMITS = [  # (axis, frames, gap, speed, side): all need a slower take for their run-out
     (ELBOW, 24, 0.02, 0.3, -1),  # elbow towards -180 deg
     (ELBOW, 12, 0.02, 0.5, -1),
@@ -225,7 +243,9 @@ def test_an_axis_on_its_limit_moving_into_it_needs_another_ik_answer(
     t, q = towards_limit(axis, 24, gap, 0.3, side)
     name = limits.names[axis]
     with pytest.raises(TimingLimitError, match=rf"run-out from frame 23 has no room even "
-                       rf"1000x slower: {name} is .* from its .* limit .*IK must leave room"):
+                       rf"1000x slower: {name} is .* from its .* limit .*; ease the camera "
+                       rf"move out to rest there, or place the track so that {name} is off "
+                       rf"its limit"):
         time_shot(q, t, limits, mode="scale")
     with pytest.raises(TimingLimitError) as info:
         time_shot(q, t, limits, mode="shot")
@@ -346,7 +366,7 @@ def test_check_advises_scale_only_when_scale_fits(limits: Limits) -> None:
             assert result["scale_factor"] == pytest.approx(scale.speed_factor)
         else:
             assert result["scale_factor"] is None
-            assert "the IK must leave room at that end" in text
+            assert "ease the camera move out to rest there" in text
     # Asked for scale, it never advises scale.
     t, q = towards_limit(ELBOW, 24, 0.0, 0.3, -1)
     with pytest.raises(TimingLimitError) as info:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from camtraj.robot import JOINT_NAMES
 from camtraj.shown import frame_runs, scale_fit
 from camtraj.timing.clock import MAX_FRAME_RATE, on_the_clock
 from camtraj.timing.edges import (
@@ -725,12 +726,17 @@ class _EdgeFit:
         bound, side = (lim.upper[j], "upper") if vel > 0 else (lim.lower[j], "lower")
         rev = bool(lim.revolute[j])
         what = ("the run-up into" if problem.side == "run-up" else "the run-out from")
+        ease = "in from rest" if problem.side == "run-up" else "out to rest"
+        fix = (f"ease the {lim.names[j]} move {ease} there, or set the motor's limit past "
+               "it in the lens file" if lim.names[j] not in JOINT_NAMES else
+               f"ease the camera move {ease} there, or place the track so that "
+               f"{lim.names[j]} is off its limit (camtraj place)")
         return (
             f"{what} frame {problem.frame} has no room even {MAX_SCALE:g}x slower: "
             f"{lim.names[j]} is {fmt(float(abs(bound - pos)), 'position', rev)} from its "
             f"{side} limit {fmt(float(bound), 'position', rev)} and "
             f"{'arrives from' if problem.side == 'run-up' else 'moves towards'} it there; "
-            "the IK must leave room at that end"
+            f"{fix}"
         )
 
 
