@@ -468,9 +468,15 @@ def _limits_used(d: dict[str, Any]) -> list[str]:
                 lo, hi = math.degrees(ax["lower"]), math.degrees(ax["upper"])
                 v = math.degrees(ax["max_velocity"])
                 lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] deg  {v:8.3f} deg/s  "
-                             f"{ax['quantity']} {ax['range'][0]} to {ax['range'][1]} "
-                             f"{ax['quantity_unit']}")
+                             f"{ax['quantity']} {_range_end(ax['range'][0])} to "
+                             f"{_range_end(ax['range'][1])} {ax['quantity_unit']}")
     return lines
+
+
+def _range_end(x: float | str | None) -> str:
+    """A lens range's end as info prints it: 0.4572, infinity (null, or "inf" in files of
+    camtraj before 2026-12)."""
+    return "infinity" if x is None or x == "inf" else f"{float(x):.6g}"
 
 
 def _axes(table: dict[str, Any]) -> list[tuple[str, bool]]:

@@ -232,7 +232,8 @@ class Lens:
     def describe(self) -> dict[str, Any]:
         """A JSON-friendly summary (MCAP metadata, reports): per axis its position unit, the
         lens quantity, its calibrated range (in ``quantity_unit``: mm, m or stops; the file's
-        own unit is ``file_unit``) and its limits (rad, per s...)."""
+        own unit is ``file_unit``; an end at infinity is None, JSON null) and its limits (rad,
+        per s...)."""
         return {
             "name": self.name,
             "source": self.source,
@@ -253,8 +254,10 @@ class Lens:
         }
 
 
-def _json_number(x: float) -> float | str:
-    return x if math.isfinite(x) else "inf"
+def _json_number(x: float) -> float | None:
+    """A range's end for JSON: null where it is infinity (a focus calibrated to infinity), as
+    every JSON camtraj writes has it."""
+    return x if math.isfinite(x) else None
 
 
 # ---------------------------------------------------------------------------------------------
