@@ -369,7 +369,7 @@ def lens_warnings(lens: Lens, shot: Shot) -> list[str]:
         off = np.abs(fl - lens.focal_length_mm) > PRIME_RTOL * lens.focal_length_mm
         if off.any():
             span = (f"{float(fl.min()):.4g} mm" if float(np.ptp(fl)) == 0.0 else
-                    f"{float(fl.min()):.4g}-{float(fl.max()):.4g} mm")
+                    f"{float(fl.min()):.4g} to {float(fl.max()):.4g} mm")
             out.append(
                 f"the shot's focal length ({span}, first at frame "
                 f"{int(shot.frames[int(np.argmax(off))])}) is not reachable with the "

@@ -389,3 +389,20 @@ def test_a_settled_end_is_retimed_at_full_pace(limits: Limits) -> None:
     assert take.t[-1] < 0.95 * fast.t[-1], (take.t[-1], fast.t[-1])
     for side in (take.report.runup, take.report.runout):
         assert side["duration"] <= 0.01, side["duration"]
+
+
+def test_a_stretched_hold_names_its_moving_axes_in_plain_words() -> None:
+    """'focus and iris move' and 'zoom, focus and iris move', not 'focus, iris moves'."""
+    from camtraj.timing.take import _stretched_holds
+
+    n = 6
+    q = np.zeros((n, 3))
+    q[1:5] = np.linspace(0.0, 0.1, 4)[:, None]  # every axis moves inside the hold
+    hold = np.array([False, True, True, True, False])
+    times = np.array([0.0, 0.1, 0.3, 0.5, 0.7, 0.8])  # the hold 0.6 s, not 0.3 s
+    frames = np.arange(1, n + 1)
+    for names, who in ((("focus",), "focus moves"), (("focus", "iris"), "focus and iris move"),
+                       (("zoom", "focus", "iris"), "zoom, focus and iris move")):
+        said = _stretched_holds(q[:, :len(names)], hold, times, 0.1, frames, names)
+        assert said == [f"frames 2-5: the camera holds still but {who}, so the retime plays "
+                        "the hold in 0.60 s, not 0.30 s"]

@@ -615,9 +615,11 @@ def _stretched_holds(q: Array, hold: BoolArray | None, frame_times: Array, dt: f
         if abs(now - was) <= HOLD_LENGTH_RTOL * was:
             continue
         moving = [names[j] for j in np.flatnonzero(np.ptp(q[a:b + 1], axis=0) > HOLD_TOL)]
+        who = (" and ".join(moving) + (" move" if len(moving) > 1 else " moves")
+               if len(moving) <= 2 else f"{', '.join(moving[:-1])} and {moving[-1]} move")
         out.append(
             f"{frame_runs([(int(frames[a]), int(frames[b]))])}: the camera holds still but "
-            f"{', '.join(moving) or 'an axis'} moves, so the retime plays the hold in "
+            f"{who if moving else 'an axis moves'}, so the retime plays the hold in "
             f"{now:.2f} s, not {was:.2f} s")
     return out
 
