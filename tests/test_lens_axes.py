@@ -486,3 +486,17 @@ def test_a_table_that_turns_the_ring_many_times_warns_of_its_angle_unit(tmp_path
     assert not any("of the ring" in w for w in lens_warnings(Lens.from_toml(ZOOM),
                                                              read_shot(SHOTS /
                                                                        "maya_dolly_push_in.usda")))
+
+
+def test_the_report_names_the_lens(dolly: dict[str, Any]) -> None:
+    """The report of a take with a lens says which lens and which motors, from the file (it
+    named the lens nowhere, where info does), and a take without one has no lens row."""
+    page = dolly["folder"] / "lens_report.html"
+    assert run_cli("report", dolly["mcap"], "-o", page).returncode == 0
+    text = html.unescape(page.read_text(encoding="utf-8"))
+    assert (f"Cine zoom 24-290 mm T2.8 (lens file {ZOOM}): zoom, focus and iris motors"
+            in text)
+    plain = dolly["folder"] / "plain.mcap"
+    convert(dolly["shot"], plain, ConvertOptions())
+    assert run_cli("report", plain, "-o", dolly["folder"] / "plain.html").returncode == 0
+    assert "lens file" not in (dolly["folder"] / "plain.html").read_text(encoding="utf-8")

@@ -149,6 +149,7 @@ class ReportData:
     # how far the run-up and run-out move [m] and turn [deg] the camera from the first / last
     # frame's pose (analysis.camera_travel); None: not recorded (older files)
     edge_travel: tuple[tuple[float, float], tuple[float, float]] | None = None
+    lens: str = ""  # the lens whose motors the take drives (lens_text), "" without one
 
     @property
     def has_take(self) -> bool:
@@ -276,6 +277,7 @@ def from_analysis(
     common: dict[str, Any] = {
         "shot": str(shot_path), "camera": shot.camera_path,
         "robot": f"{robot.name} ({robot.source})", "fps": float(shot.fps),
+        "lens": "" if robot.lens is None else lens_text(robot.lens.describe()),
         "placement": placement_text(analysis.placement.describe()),
         "base2world": analysis.placement.base2world.copy(),
         "joint_names": tuple(limits.names), "revolute": limits.revolute.copy(),
@@ -510,6 +512,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
     data = ReportData(
         shot=md.get("source_file", "?"), camera=md.get("camera_prim", "?"),
         robot=md.get("robot", "?"), status="ok", message="", timing=mode,
+        lens=lens_text(json.loads(robot_md["lens"])) if lens else "",
         speed_factor=_float(md.get("speed_factor")), servo_rate_hz=_float(
             md.get("servo_rate_hz")), fps=_float(md.get("fps")),
         max_speed=_float(md.get("max_speed")), max_speed_set_by=md.get("max_speed_set_by", ""),
@@ -611,6 +614,16 @@ def _edges_ok(e: Any) -> bool:
                 isinstance(use, dict) and all(
                     isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
                     for v in use.values()) for use in side.values()) for side in e.values()))
+
+
+def lens_text(desc: dict[str, Any]) -> str:
+    """'Cine zoom 24-290 mm T2.8 (lens file lenses/zoom.toml): zoom, focus and iris motors'
+    of a lens's ``describe()``."""
+    axes = list(desc.get("axes", {}))
+    motors = (" and ".join(axes) if len(axes) <= 2
+              else f"{', '.join(axes[:-1])} and {axes[-1]}")
+    return (f"{desc.get('name', '?')} (lens file {desc.get('source', '?')}): {motors} "
+            f"motor{'s' if len(axes) > 1 else ''}")
 
 
 def _travel_ok(t: Any) -> bool:

@@ -74,6 +74,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
         ("camera", data.camera),
         ("frames", f"{frame_span(fn[0], fn[-1])} ({fn.size} frames at {data.fps:g} fps)"),
         ("robot", data.robot),
+        *([("lens", data.lens)] if data.lens else []),
         ("placement", data.placement),
         ("timing mode", data.timing),
     ]
