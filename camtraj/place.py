@@ -756,14 +756,18 @@ def place(
                        with_clearance(sf, clearance), region)
 
 
+#: What the placement tables' "limits use" column is.
+LIMITS_USE = ("limits use: the robot's peak position use (a lens's motors apart: no placement "
+              "moves them), 0% mid-range, 100% touching a limit")
+
+
 def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
              f"in {report.seconds:.1f} s (floor z {report.base_z:.3f} m)",
              "  #     x [m]     y [m]  yaw [deg]  speed  limits use  wrist  stretch  obstacle"
              "  set by",
-             "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
-             "stretch: margins)"]
+             f"  ({LIMITS_USE}; wrist, stretch: margins)"]
     for i, r in enumerate(report.results, 1):
         lines.append(f"  {i:<2} {r.x:9.3f} {r.y:9.3f} {r.yaw_deg:9.2f}  {columns(r)}")
         if not r.ok:

@@ -40,6 +40,7 @@ from camtraj.inputs import (
 )
 from camtraj.options import TIMING_MODES, ConvertOptions
 from camtraj.place import (
+    LIMITS_USE,
     Layout,
     Problem,
     _race,
@@ -443,8 +444,7 @@ def table(report: SceneReport) -> str:
     lines = [f"layout {report.name}: {n} shots, {report.evaluated} shot placements solved, "
              f"{report.screened} screened, in {report.seconds:.1f} s (floor z "
              f"{report.base_z:.3f} m)",
-             "  (limits use: peak position use, 0% mid-range, 100% touching a limit; wrist, "
-             "stretch: margins; obstacle: closest approach)"]
+             f"  ({LIMITS_USE}; wrist, stretch: margins; obstacle: closest approach)"]
     if report.ok and report.layout is not None:
         lay = report.layout
         lines += _rows(report, lay)
