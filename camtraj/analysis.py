@@ -122,8 +122,8 @@ def margins_summary(analysis: Analysis) -> dict[str, Any]:
     }
 
 
-def camera_travel(analysis: Analysis) -> list[tuple[float, float]]:
-    """How far the camera moves [m] and turns [rad] from its first frame's pose during the
+def camera_travel(analysis: Analysis) -> tuple[tuple[float, float], tuple[float, float]]:
+    """How far the camera moves [m] and turns [deg] from its first frame's pose during the
     run-up, and from its last frame's during the run-out, at most (a robot whose redundant
     axes still move on a frame where the camera is at rest swings the camera around it:
     ``--edges still``)."""
@@ -137,5 +137,5 @@ def camera_travel(analysis: Analysis) -> list[tuple[float, float]]:
         moved = float(np.linalg.norm(at[:, :3, 3] - here[:3, 3], axis=1).max())
         # the angle of each pose's rotation from the frame's: trace(R0^T R) = 1 + 2 cos
         cos = (np.einsum("ij,kij->k", here[:3, :3], at[:, :3, :3]) - 1.0) / 2.0
-        out.append((moved, float(np.arccos(np.clip(cos, -1.0, 1.0)).max())))
-    return out
+        out.append((moved, math.degrees(float(np.arccos(np.clip(cos, -1.0, 1.0)).max()))))
+    return out[0], out[1]

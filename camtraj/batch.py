@@ -366,7 +366,7 @@ def _convert_one(
     """
     start = time.perf_counter()
     cpu_start = time.process_time()
-    held = _ShotWarnings()  # said by the batch if the shot converts, dropped if it fails
+    held = _ShotWarnings()  # said by the batch if the shot converts or cannot be done
     logging.getLogger().addHandler(held)
     interrupts.install()  # before looking at the stop: a stop sent before this is seen there
     try:

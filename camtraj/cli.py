@@ -49,6 +49,7 @@ from camtraj.shown import (
     edge_use,
     frame_rate,
     frame_span,
+    listed,
     percent,
     scale_fit,
     seconds,
@@ -127,18 +128,21 @@ class _Main(click.Group):
         return super().get_command(ctx, cmd_name)
 
     def invoke(self, ctx: click.Context) -> Any:
-        ok = False
+        code: Any = 1
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("default")
                 try:
                     result = super().invoke(ctx)
-                    ok = True
+                    code = 0
                 except SystemExit as exc:
-                    ok = exc.code in (0, None)
+                    code = exc.code or 0
+                    raise
+                except click.exceptions.Exit as exc:  # ctx.exit(code) of a lazy command
+                    code = exc.exit_code
                     raise
                 finally:
-                    _pass_on_warnings(caught, ok)
+                    _pass_on_warnings(caught, code)
             sys.stdout.flush()
         except KeyboardInterrupt as exc:
             stopped(exc, ctx.invoked_subcommand)
@@ -188,15 +192,22 @@ class _Main(click.Group):
 
 
 _HELD_LOG = logging.handlers.MemoryHandler(capacity=10_000, flushLevel=logging.CRITICAL + 1)
-"""Warnings of a run, held until it ends: printed if it succeeds, dropped if it fails."""
+"""Warnings of a run, held until it ends: printed if it succeeds or cannot be done as asked,
+dropped if it fails otherwise."""
 
 
-def _pass_on_warnings(caught: list[warnings.WarningMessage], ok: bool) -> None:
-    """Logged and Python warnings (numpy overflow…) as one line each, on success only.
+def _pass_on_warnings(caught: list[warnings.WarningMessage], code: Any) -> None:
+    """Logged and Python warnings (numpy overflow…) as one line each, on success; on exit 3
+    (the shot cannot be done as asked) the logged ones, what reading the shot warned of (a
+    metersPerUnit left to USD's fallback, a layer USD could not open: often why), after the
+    failure's own lines (:func:`~camtraj.errors.failure_lines`).
 
-    A failed run says what went wrong in its one ERROR line on stderr, and nothing else.
+    Any other failed run says what went wrong in its ERROR line on stderr, and nothing else.
     """
-    if not ok:
+    if code not in (0, None):
+        if code == EXIT_INFEASIBLE:
+            with contextlib.suppress(OSError, ValueError):
+                _HELD_LOG.flush()
         _HELD_LOG.acquire()
         try:
             _HELD_LOG.buffer.clear()
@@ -468,15 +479,19 @@ def _limits_used(d: dict[str, Any]) -> list[str]:
                 lo, hi = math.degrees(ax["lower"]), math.degrees(ax["upper"])
                 v = math.degrees(ax["max_velocity"])
                 lines.append(f"  {name:<7} [{lo:9.3f}, {hi:9.3f}] deg  {v:8.3f} deg/s  "
-                             f"{ax['quantity']} {_range_end(ax['range'][0])} to "
-                             f"{_range_end(ax['range'][1])} {ax['quantity_unit']}")
+                             f"{ax['quantity']} {_range_end(ax['range'][0], ax)} to "
+                             f"{_range_end(ax['range'][1], ax)}")
     return lines
 
 
-def _range_end(x: float | str | None) -> str:
-    """A lens range's end as info prints it: 0.4572, infinity (null, or "inf" in files of
-    camtraj before 2026-12)."""
-    return "infinity" if x is None or x == "inf" else f"{float(x):.6g}"
+def _range_end(x: float | str | None, axis: dict[str, Any]) -> str:
+    """A lens range's end as info prints it: '0.4572 m', 'infinity' (null, or "inf" in files
+    of camtraj before 2026-12), 'T2.8'."""
+    if x is None or x == "inf":
+        return "infinity"
+    unit = axis["quantity_unit"]
+    return f"T{float(x):.6g}" if unit == "T-stop" else (
+        f"f/{float(x):.6g}" if unit == "f-stop" else f"{float(x):.6g} {unit}")
 
 
 def _axes(table: dict[str, Any]) -> list[tuple[str, bool]]:
@@ -610,8 +625,7 @@ def _by_axis(violations: list[dict[str, Any]]) -> list[str]:
     lines = []
     for worst, *others in axes.values():
         names = [v["quantity"] for v in others]
-        also = (f" (also {', '.join(names[:-1])} and {names[-1]})" if len(names) > 1
-                else f" (also {names[0]})" if names else "")
+        also = f" (also {listed(names)})" if names else ""
         lines.append(worst["text"] + also)
     return lines
 
@@ -717,17 +731,18 @@ def _take_report(r: dict[str, Any]) -> str:
                                                > SWING_NOTE_DEG)
              and not part.get("from_start_pose")]
     if swung and r.get("edges_asked", r.get("edges")) != "still":
-        where = " and ".join(f"frame {frame}" for frame, _ in swung)
+        where = listed([f"frame {frame}" for frame, _ in swung])
         lines.append(f"  the camera is still on {where} but the robot's axes are already "
                      "moving there, so the run-up/run-out swings the camera around "
                      f"{'it' if len(swung) == 1 else 'them'}: --edges still (the default) "
                      "keeps the robot still there, for a slower take")
     hard = [frame for frame, part in swung if part.get("camera_rest") == "at_rest"]
     if hard and r.get("edges_asked", r.get("edges")) == "still":
-        where = " and ".join(f"frame {frame}" for frame in hard)
+        where = listed([f"frame {frame}" for frame in hard])
+        them = "it" if len(hard) == 1 else "them"
         lines.append(f"  the camera stops hard on {where}: still there but accelerating (a "
                      "cubic ease, a move from standstill), so the run-up/run-out carries the "
-                     "robot past the frame and back, swinging the camera around it; a smooth "
+                     f"robot past {them} and back, swinging the camera around {them}; a smooth "
                      "(quintic) ease settles with no run-up at all, and --timing optimal "
                      "starts and ends such a move at a tenth of its pace")
     if r.get("edges_asked") == "still" and not any(

@@ -499,8 +499,8 @@ def metadata(analysis: Analysis, shot_path: str | Path, options: ConvertOptions)
         # How far the run-up and run-out move [m] and turn [deg] the camera from the first and
         # last frame's pose, for the report's run-up / run-out row.
         "edge_camera_travel": json.dumps(
-            {side: {"m": m, "deg": math.degrees(rad)}
-             for side, (m, rad) in zip(("runup", "runout"), camera_travel(analysis),
+            {side: {"m": m, "deg": deg}
+             for side, (m, deg) in zip(("runup", "runout"), camera_travel(analysis),
                                        strict=True)}, sort_keys=True),
         # With a lens only: its axes after the joints, their units and calibrated ranges.
         **({} if robot.lens is None else {"lens": json.dumps(robot.lens.describe())}),
@@ -682,7 +682,7 @@ def summary(
             # how far the camera moves from the first (last) frame's position before (after)
             "camera_travel_m": travel[side][0],
             # and how far it turns [deg] (a pan alone moves it little)
-            "camera_turn_deg": math.degrees(travel[side][1]),
+            "camera_turn_deg": travel[side][1],
             # whether the authored camera is at rest on that frame (--edges still keeps the
             # robot still there too)
             "camera_at_rest": bool(resting[side]),

@@ -52,8 +52,8 @@ class InfeasibleError(CamtrajError):
 
     Attributes:
         shot_warnings: What reading the shot warned of (a layer in other units, a focal length
-            no lens has): often the cause, so said with the failure too (set by
-            :func:`camtraj.convert.analyse`).
+            no lens has): often the cause, so said with the failure too (set by the command
+            that read the shot: convert's ``analyse``, place, a scene's placement).
     """
 
     exit_code = 3

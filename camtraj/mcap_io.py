@@ -728,37 +728,34 @@ def interpolate_servo(t: Array, q: Array, qd: Array, times: ArrayLike) -> Array:
 
 
 def tf_times(take: TakeData) -> Array:
-    """The /tf sample times [s]: every film frame's own stamp, the take's first and last
-    sample, and the film frame rate across the rest of the take.
+    """The /tf sample times [s]: the film frame rate across the whole take, every film
+    frame's own stamp and the take's first and last sample.
 
     The grid is anchored at the first shot frame (a shot timed at the frame rate has its film
-    frames on it); a grid point within a quarter of a frame interval of a film frame or of
-    the take's ends gives way to it. So every film frame's pose is in /tf also when the take
-    is retimed (``scale`` slows it by a factor that is no whole number, ``optimal`` plays
-    frames faster than the film: one /tf sample in eight frames of a retimed push-in, and
-    `camtraj report` drew a frame's robot from another's), and so are the poses the take
-    starts and ends in.
+    frames on it). The frames are added where they are not on it, so every film frame's pose
+    is in /tf also when the take is retimed (``scale`` slows it by a factor that is no whole
+    number, ``optimal`` plays frames faster than the film: one /tf sample in eight frames of a
+    retimed push-in, and `camtraj report` drew a frame's robot from another's), and so are
+    the poses the take starts and ends in; no two samples are more than a frame interval
+    apart.
     """
     start, end = float(take.t[0]), float(take.t[-1])
     ft = np.asarray(take.frame_times, dtype=float)
     anchor = float(ft[0]) if ft.size else start
-    # the grid's sums can be a nanosecond off the frames' own stamps: points near a frame or
-    # an end go, and the frames and ends themselves are kept (the file's nanosecond clock can
-    # put a take that ends on its last film frame half a nanosecond before that frame)
+    # times on the file's nanosecond clock: a take that ends on its last film frame (no
+    # run-out) can end half a nanosecond before the grid's last point, which is that frame
     slack = 1e-6  # [frames]
     k_lo = -math.floor((anchor - start) * take.fps + slack)
     k_hi = math.floor((end - anchor) * take.fps + slack)
     grid = anchor + np.arange(k_lo, k_hi + 1, dtype=float) / take.fps
-    ends = np.array([start, end])
-    if ft.size:  # an end on a film frame (no run-up or run-out) is that frame
-        ends = ends[np.abs(ends[:, None] - ft[[0, -1]]).min(axis=1) > 2e-9]
-    kept = np.sort(np.concatenate([ft, ends]))
-    after = np.searchsorted(kept, grid).clip(0, kept.size - 1)
-    before = (after - 1).clip(0)
-    gap = np.minimum(np.abs(kept[after] - grid), np.abs(kept[before] - grid))
-    times = np.concatenate([grid[gap > 0.25 / take.fps], kept])
-    times.sort()
-    out: Array = np.unique(np.clip(times, start, end))
+    others = np.concatenate([grid, [start, end]])
+    if ft.size:  # a grid point or an end within 2 ns of a frame is that frame, at its stamp
+        after = np.searchsorted(ft, others).clip(0, ft.size - 1)
+        gap = np.minimum(np.abs(ft[after] - others), np.abs(ft[(after - 1).clip(0)] - others))
+        others = others[gap > 2e-9]
+    others = np.sort(others)
+    others = others[np.diff(others, prepend=-np.inf) > 2e-9]
+    out: Array = np.clip(np.sort(np.concatenate([ft, others])), start, end)
     return out
 
 

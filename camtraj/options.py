@@ -54,7 +54,8 @@ class ConvertOptions:
             the camera settles into it, and the solver plans for it;
             elsewhere as gentle), ``"gentle"`` (per axis no more of the acceleration and
             jerk limits than the shot uses, at least a quarter of them; the robot may move
-            on a still end frame, for a take up to 16% faster on the shot set) or ``"fast"``
+            on a still end frame, for a take up to 16% faster on the shot set's moves it
+            changes) or ``"fast"``
             (the full limits: the shortest, time-optimal run-up and run-out).
         lens: A lens file (:mod:`camtraj.lens`): its zoom, focus and iris motors are timed
             and written with the joints; default the robot file's ``[lens]``, if any.
@@ -283,8 +284,8 @@ def more_convert_options(func: F) -> F:
             "frame the robot stands still there too (not even accelerating where the camera "
             "settles), elsewhere as gentle; gentle = per axis no "
             "more acceleration and jerk than the shot uses (at least 25% of the limits), the "
-            "robot free to move on a still end frame (on the shot set up to 16% faster, "
-            "median 8%); fast = the full limits (shortest).",
+            "robot free to move on a still end frame (on the shot set's moves it changes up to "
+            "16% faster, median 8%); fast = the full limits (shortest).",
         ),
         click.option(
             "--lens",

@@ -684,7 +684,11 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
     if robot.lens is not None:  # a frame beyond the lens's calibration is an error up front
         from camtraj.lens import lens_positions
 
-        lens_q = lens_positions(robot.lens, shot)
+        try:
+            lens_q = lens_positions(robot.lens, shot)
+        except InfeasibleError as exc:  # what reading the shot warned of is often why
+            exc.shot_warnings = tuple(shot.warnings)
+            raise
     obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
     base_z = sf.floor_height * shot.meters_per_unit
     problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "SHOWN_TURN_DEG", "TABLE_MAX_SPEED", "camera_moves", "distance",
-           "edge_use", "frame_rate", "frame_runs", "frame_span", "percent", "scale_fit", "seconds",
-           "servo", "speed_percent"]
+__all__ = ["EDGE_QUANTITIES", "SHOWN_RUNS", "SHOWN_TURN_DEG", "TABLE_MAX_SPEED", "camera_moves",
+           "distance", "edge_use", "frame_rate", "frame_runs", "frame_span", "listed", "percent",
+           "scale_fit", "seconds", "servo", "speed_percent"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -37,25 +37,30 @@ def frame_span(first: object, last: object, text: Callable[[Any], str] = str) ->
     return f"{a} to {b}" if negative else f"{a}-{b}"
 
 
-#: More runs of frames than this are shown as the first and last few and their count (a
-#: handheld shake over its jerk limits listed 35 runs per axis, over 1,000 characters on
-#: one line; check --json and the report keep every frame).
+#: An error line shows more runs of frames than this as the first and last few and their
+#: count (a handheld shake over its jerk limits listed 35 runs per axis, over 1,000
+#: characters on one line; check --json and the report keep every frame).
 SHOWN_RUNS = 8
 
 
-def frame_runs(runs: Iterable[tuple[int, int]]) -> str:
+def frame_runs(runs: Iterable[tuple[int, int]], most: int | None = None) -> str:
     """Runs of film frames (first, last): 'frames 12-19, 40' ('frames -3 to -1, 4'); one
-    frame alone: 'frame 40'; more than :data:`SHOWN_RUNS` runs: the first five, '...', the
-    last two and the count ('frames 0-10, 12-16, 34-37, 39-50, 52-55, ..., 289-292,
-    295-299 (30 stretches)')."""
+    frame alone: 'frame 40'; more than ``most`` runs (every run where None): the first five,
+    '...', the last two and the count ('frames 0-10, 12-16, 34-37, 39-50, 52-55, ...,
+    289-292, 295-299 (30 stretches)')."""
     runs = list(runs)
     if len(runs) == 1 and runs[0][0] == runs[0][1]:
         return f"frame {runs[0][0]}"
     shown = [frame_span(a, b) if b != a else f"{a}" for a, b in runs]
-    if len(shown) > SHOWN_RUNS:
+    if most is not None and len(shown) > most:  # most >= 7: what the short form shows
         return (f"frames {', '.join(shown[:5])}, ..., {', '.join(shown[-2:])} "
                 f"({len(shown)} stretches)")
     return "frames " + ", ".join(shown)
+
+
+def listed(words: Sequence[str]) -> str:
+    """Words as a person lists them: 'a', 'a and b', 'a, b and c'."""
+    return " and ".join(words) if len(words) <= 2 else f"{', '.join(words[:-1])} and {words[-1]}"
 
 
 def seconds(x: float, digits: int = 2) -> str:

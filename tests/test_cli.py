@@ -576,13 +576,15 @@ def test_one_frame_alone_is_a_frame_not_frames() -> None:
     assert frame_runs([(1001, 1001)]) == "frame 1001"
     assert frame_runs([(12, 19), (40, 40)]) == "frames 12-19, 40"
     assert frame_runs([(-3, -1)]) == "frames -3 to -1"
-    # many stretches (a handheld shake over its jerk limit: 35 of them, 1,166 characters on
-    # one ERROR line): the first five, the last two and how many
+    # many stretches on one ERROR line (a handheld shake over its jerk limit: 35 of them,
+    # 1,166 characters): the first five, the last two and how many; every one elsewhere
     eight = [(10 * i, 10 * i + 2) for i in range(8)]
-    assert frame_runs(eight) == "frames " + ", ".join(f"{a}-{b}" for a, b in eight)
+    every = "frames " + ", ".join(f"{a}-{b}" for a, b in eight)
+    assert frame_runs(eight, 8) == frame_runs(eight) == every
     nine = [*eight, (90, 90)]
-    assert frame_runs(nine) == "frames 0-2, 10-12, 20-22, 30-32, 40-42, ..., 70-72, 90 " \
-                               "(9 stretches)"
+    assert frame_runs(nine, 8) == "frames 0-2, 10-12, 20-22, 30-32, 40-42, ..., 70-72, 90 " \
+                                  "(9 stretches)"
+    assert frame_runs(nine) == every + ", 90"
 
 
 def test_a_failure_says_what_reading_the_shot_warned_of(tmp_path: Path) -> None:
@@ -627,6 +629,23 @@ def test_a_failure_says_what_reading_the_shot_warned_of(tmp_path: Path) -> None:
     assert re.search(re.escape(said), procs["batch"].stderr)
     report = json.loads((tmp_path / "batch" / "batch_report.json").read_text())
     assert any(said in w for w in report["shots"][0]["warnings"])
+    # and what the reader logs as it reads (a metersPerUnit left to USD's centimetres: a
+    # stage written in millimetres puts the camera 140 m up, where no placement reaches)
+    far = Usd.Stage.CreateNew(str(tmp_path / "no_unit.usda"))
+    UsdGeom.SetStageUpAxis(far, UsdGeom.Tokens.z)
+    far.SetStartTimeCode(1)
+    far.SetEndTimeCode(12)
+    move = UsdGeom.Camera.Define(far, "/cam").AddTranslateOp()
+    for f in range(1, 13):
+        move.Set(Gf.Vec3d(500.0 + 10.0 * f, 0.0, 14000.0), f)
+    far.GetRootLayer().Save()
+    assert "metersPerUnit" not in (tmp_path / "no_unit.usda").read_text()
+    logged = "metersPerUnit is not authored; using USD's fallback 0.01 (centimetres)"
+    procs = run_all({cmd: [cmd, tmp_path / "no_unit.usda", *more] for cmd, more in (
+        ("check", ()), ("convert", ("-o", tmp_path / "y.mcap")),
+        ("place", ("-o", tmp_path / "placed2.toml")))})
+    for key, proc in procs.items():
+        assert proc.returncode == 3 and logged in proc.stderr, (key, proc.stderr)
     assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "placed.toml").exists()
 
 
@@ -665,9 +684,10 @@ def test_a_camera_that_stops_hard_is_said_to_swing_around_its_end_frames(
     for proc in procs.values():
         assert proc.returncode == 0, proc.stderr
     note = "the camera stops hard on frame 1 and frame 60: still there but accelerating"
-    moved = re.search(r"the camera moves ([0-9.]+) (mm|cm) .*before the first frame",
-                      procs["cubic"].stdout)
-    assert moved and float(moved[1]) * (10.0 if moved[2] == "cm" else 1.0) > 1.0
+    # the README's example: about 20 cm and 7 deg around frame 1 (22.2 cm, 7.5 deg here)
+    moved = re.search(r"the camera moves ([0-9.]+) cm and turns ([0-9.]+) deg before the "
+                      r"first frame", procs["cubic"].stdout)
+    assert moved and 15.0 <= float(moved[1]) <= 30.0 and 5.0 <= float(moved[2]) <= 10.0
     assert note in procs["cubic"].stdout
     assert note not in procs["quintic"].stdout
     assert ("the camera moves 0.0 mm before the first frame, 0.0 mm after the last"

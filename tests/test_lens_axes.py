@@ -192,7 +192,8 @@ def test_metadata_and_summary_name_the_lens_axes(dolly: dict[str, Any]) -> None:
     assert info.returncode == 0, info.stderr
     assert re.search(r"^  zoom\s+\d+%", info.stdout, re.M)
     assert "lens Cine zoom 24-290 mm T2.8" in info.stdout
-    assert re.search(r"^  focus .* focus distance 0.6 to infinity m$", info.stdout, re.M)
+    assert re.search(r"^  focus .* focus distance 0.6 m to infinity$", info.stdout, re.M)
+    assert re.search(r"^  iris .* stop T2.8 to T22$", info.stdout, re.M)
     assert summary["lens"]["axes"]["focus"]["range"] == [0.6, None]
     # the lens file's [controller.zoom] (65536 counts a turn): the counts the take commands,
     # from the zoom motor's column of /joint_states as mcap_ros2 decodes it

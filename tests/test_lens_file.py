@@ -281,7 +281,7 @@ def test_a_lens_quantity_beyond_the_table_names_the_frame(
 def test_prime_and_missing_motor_warnings() -> None:
     prime = Lens.from_toml(PRIME)
     shot = _shot([24.0, 57.6], [2.0, 3.0], [2.8, 4.0])
-    assert any("24-57.6 mm" in w and "50 mm prime" in w for w in lens_warnings(prime, shot))
+    assert any("24 to 57.6 mm" in w and "50 mm prime" in w for w in lens_warnings(prime, shot))
     commanded = commanded_lens(prime, lens_positions(prime, shot), shot)
     assert commanded["focal_length_mm"].tolist() == [50.0, 50.0]
     assert np.abs(commanded["focus_distance_m"] - [2.0, 3.0]).max() < 1e-12

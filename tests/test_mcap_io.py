@@ -9,6 +9,7 @@ import re
 import time
 import tracemalloc
 from pathlib import Path
+from types import SimpleNamespace
 from typing import IO, Any
 
 import numpy as np
@@ -278,12 +279,30 @@ def test_take_without_frames(tmp_path: Path) -> None:
 
 
 def test_tf_times_grid(take: TakeData) -> None:
+    """The film frame rate from the take's first sample to its last, anchored on the shot's
+    frames (every film frame time is a /tf time), with the take's ends added."""
     times = tf_times(take)
-    np.testing.assert_allclose(np.diff(times), 1 / take.fps, rtol=0, atol=1e-12)
-    assert 0 <= times[0] < 1 / take.fps
-    assert take.t[-1] - 1 / take.fps < times[-1] <= take.t[-1]
-    # Anchored on the shot's frames: every film frame time is a /tf time.
+    assert times[0] == take.t[0] and times[-1] == take.t[-1]
+    inner = times[1:-1]
+    np.testing.assert_allclose(np.diff(inner), 1 / take.fps, rtol=0, atol=1e-12)
+    step = 1 / take.fps + 1e-12
+    assert 0 < inner[0] - times[0] <= step and 0 < times[-1] - inner[-1] <= step
     assert np.all(np.min(np.abs(times[:, None] - take.frame_times[None, :]), axis=0) < 1e-12)
+
+
+@pytest.mark.parametrize("factor", [1.0, 1.3, 1.45, 2.7, 0.37])
+def test_tf_times_of_a_retimed_take_are_never_more_than_a_frame_apart(factor: float) -> None:
+    """A take whose frames are ``factor`` film intervals apart (scale slows it, optimal plays
+    it faster): every frame's stamp is a /tf time, so are the take's ends, and no two /tf
+    times are more than a film frame interval apart or closer than 2 ns."""
+    fps = 24.0
+    frames = 0.25 + factor * np.arange(30) / fps
+    t = np.linspace(0.0, frames[-1] + 0.3, 2000)
+    times = tf_times(SimpleNamespace(t=t, frame_times=frames, fps=fps))  # type: ignore[arg-type]
+    assert set(frames) <= set(times.tolist())
+    assert times[0] == t[0] and times[-1] == t[-1]
+    assert np.diff(times).max() <= 1 / fps + 1e-12
+    assert np.diff(times).min() > 2e-9
 
 
 def test_tf_times_hold_every_film_frame_stamp_of_a_timed_take() -> None:

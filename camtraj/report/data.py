@@ -34,7 +34,7 @@ from camtraj.errors import (
     UnreachableFramesError,
 )
 from camtraj.report.samples import QUANTITIES, Samples, in_blocks, reduce_samples
-from camtraj.shown import frame_runs
+from camtraj.shown import frame_runs, listed
 
 if TYPE_CHECKING:
     from camtraj.analysis import Analysis
@@ -308,7 +308,7 @@ def from_analysis(
             margins=None if path is None else margins_summary(analysis),
             edges={"runup": take.report.runup.get("peak_use", {}),
                    "runout": take.report.runout.get("peak_use", {})},
-            edge_travel=_degrees(camera_travel(analysis)),
+            edge_travel=camera_travel(analysis),
         )
         return data
     frame_times = shot.times - shot.times[0]
@@ -620,9 +620,7 @@ def lens_text(desc: dict[str, Any]) -> str:
     """'Cine zoom 24-290 mm T2.8 (lens file lenses/zoom.toml): zoom, focus and iris motors'
     of a lens's ``describe()``."""
     axes = list(desc.get("axes", {}))
-    motors = (" and ".join(axes) if len(axes) <= 2
-              else f"{', '.join(axes[:-1])} and {axes[-1]}")
-    return (f"{desc.get('name', '?')} (lens file {desc.get('source', '?')}): {motors} "
+    return (f"{desc.get('name', '?')} (lens file {desc.get('source', '?')}): {listed(axes)} "
             f"motor{'s' if len(axes) > 1 else ''}")
 
 
@@ -631,12 +629,6 @@ def _travel_ok(t: Any) -> bool:
             and all(isinstance(side, dict) and set(side) == {"m", "deg"} and all(
                 isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
                 and v >= 0.0 for v in side.values()) for side in t.values()))
-
-
-def _degrees(travel: list[tuple[float, float]]) -> tuple[tuple[float, float], tuple[float, float]]:
-    """analysis.camera_travel's (m, rad) per side as (m, deg)."""
-    (m0, r0), (m1, r1) = travel
-    return (m0, math.degrees(r0)), (m1, math.degrees(r1))
 
 
 def _float(text: str | None) -> float:

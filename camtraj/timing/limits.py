@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from camtraj.errors import LimitError
 from camtraj.robot import JOINT_KINDS, JOINT_NAMES
-from camtraj.shown import frame_runs
+from camtraj.shown import SHOWN_RUNS, frame_runs
 from camtraj.timing.path import Samples, runs
 
 Array = NDArray[np.float64]
@@ -152,7 +152,8 @@ class LimitViolation:
 
     @property
     def frame_text(self) -> str:
-        """The frames as text, e.g. ``"frames 12-19, 40"``."""
+        """Every frame as text, e.g. ``"frames 12-19, 40"`` (check --json, the report);
+        :meth:`describe`'s one line shortens a long list (:data:`SHOWN_RUNS`)."""
         return frame_runs(self.frames)
 
     def describe(self) -> str:
@@ -163,7 +164,7 @@ class LimitViolation:
             lim = fmt(self.limit, self.quantity, self.revolute)
             return (
                 f"{self.axis} position {peak} is beyond its {side} limit {lim} "
-                f"on {self.frame_text}"
+                f"on {frame_runs(self.frames, SHOWN_RUNS)}"
             )
         lim = fmt(self.limit, self.quantity, self.revolute)
         peak = fmt(abs(self.peak), self.quantity, self.revolute)
@@ -176,7 +177,8 @@ class LimitViolation:
         if self.worst is not None and len(self.frames) > 1:
             a, b = self.worst
             at = f" (worst at frame {a})" if a == b else f" (worst between frames {a} and {b})"
-        return f"{self.axis} {self.quantity} {peak}{at} exceeds {lim}{by} on {self.frame_text}"
+        return (f"{self.axis} {self.quantity} {peak}{at} exceeds {lim}{by} on "
+                f"{frame_runs(self.frames, SHOWN_RUNS)}")
 
 
 class TimingLimitError(LimitError):

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from camtraj.robot import JOINT_NAMES
-from camtraj.shown import frame_runs, scale_fit
+from camtraj.shown import frame_runs, listed, scale_fit
 from camtraj.timing.clock import MAX_FRAME_RATE, on_the_clock
 from camtraj.timing.edges import (
     EDGE_MODES,
@@ -615,11 +615,11 @@ def _stretched_holds(q: Array, hold: BoolArray | None, frame_times: Array, dt: f
         if abs(now - was) <= HOLD_LENGTH_RTOL * was:
             continue
         moving = [names[j] for j in np.flatnonzero(np.ptp(q[a:b + 1], axis=0) > HOLD_TOL)]
-        who = (" and ".join(moving) + (" move" if len(moving) > 1 else " moves")
-               if len(moving) <= 2 else f"{', '.join(moving[:-1])} and {moving[-1]} move")
+        who = (f"{listed(moving)} {'moves' if len(moving) == 1 else 'move'}" if moving
+               else "an axis moves")
         out.append(
             f"{frame_runs([(int(frames[a]), int(frames[b]))])}: the camera holds still but "
-            f"{who if moving else 'an axis moves'}, so the retime plays the hold in "
+            f"{who}, so the retime plays the hold in "
             f"{now:.2f} s, not {was:.2f} s")
     return out
 
