@@ -294,8 +294,9 @@ def lens_positions(lens: Lens, shot: Shot) -> Array:
     at its ``home``.
 
     Raises:
-        LensRangeError: At the first frame where a quantity leaves the calibrated range (the
-            frame, the value and the lens's end of range named).
+        LensRangeError: Where a quantity leaves the calibrated range (the first such frame,
+            its value and the lens's end of range named, and every frame outside).
+        InputError: A focus distance or f-stop unset (0) on some frames but set on others.
     """
     n = shot.frames.shape[0]
     out = np.empty((n, len(lens.axes)))
