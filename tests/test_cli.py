@@ -601,13 +601,7 @@ def test_a_failure_says_what_reading_the_shot_warned_of(tmp_path: Path) -> None:
     for f in range(1, 13):
         op.Set(Gf.Vec3d(500.0 + 10.0 * f, 0.0, 140.0), f)  # cm: 5 m ahead, 1.4 m up
     anim.GetRootLayer().Save()
-    stage = Usd.Stage.CreateNew(str(tmp_path / "shot_m.usda"))
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    stage.SetStartTimeCode(1)
-    stage.SetEndTimeCode(12)
-    stage.SetTimeCodesPerSecond(24)
-    stage.SetFramesPerSecond(24)
+    stage = _metre_stage(tmp_path / "shot_m.usda", 12, 24.0)
     stage.GetRootLayer().subLayerPaths.append("anim_cm.usda")
     stage.GetRootLayer().Save()
     shot = tmp_path / "shot_m.usda"
@@ -649,16 +643,22 @@ def test_a_failure_says_what_reading_the_shot_warned_of(tmp_path: Path) -> None:
     assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "placed.toml").exists()
 
 
-def _truck_stage(path: Path, ease: Any) -> Path:
-    """A Z-up metre stage: the camera trucks 3 m along x over 60 frames at 30 fps, eased by
-    ``ease`` (0..1 -> 0..1), looking across the track."""
+def _metre_stage(path: Path, last: int, fps: float) -> Any:
+    """A new Z-up metre stage of frames 1..``last`` at ``fps``."""
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     stage.SetStartTimeCode(1)
-    stage.SetEndTimeCode(60)
-    stage.SetTimeCodesPerSecond(30)
-    stage.SetFramesPerSecond(30)
+    stage.SetEndTimeCode(last)
+    stage.SetTimeCodesPerSecond(fps)
+    stage.SetFramesPerSecond(fps)
+    return stage
+
+
+def _truck_stage(path: Path, ease: Any) -> Path:
+    """A Z-up metre stage: the camera trucks 3 m along x over 60 frames at 30 fps, eased by
+    ``ease`` (0..1 -> 0..1), looking across the track."""
+    stage = _metre_stage(path, 60, 30.0)
     cam = UsdGeom.Camera.Define(stage, "/cam")
     cam.CreateFocalLengthAttr(35.0)
     move = cam.AddTranslateOp()
