@@ -81,6 +81,10 @@ __all__ = [
 
 OPTIONS_KEY = "convert_options"
 """Key under which a batch records the convert options in each shot's summary JSON."""
+SOURCE_KEY = "batch_source"
+"""Key under which a batch records the shot's real path: a shot of the same name from another
+folder is not up to date with its take (a new user's batch skipped such a shot and kept the
+other's take)."""
 
 
 def recorded_options(options: ConvertOptions) -> dict[str, Any]:
@@ -377,7 +381,8 @@ def _convert_one(
         # The options are recorded so that a later batch with other options does not skip
         # this shot.
         summary = convert(shot, output, options, summary_path=summary_path,
-                          summary_extra={OPTIONS_KEY: recorded_options(options)},
+                          summary_extra={OPTIONS_KEY: recorded_options(options),
+                                         SOURCE_KEY: os.path.realpath(shot)},
                           rig_layer=rig_layer)
     except CamtrajError as exc:
         # the batch names the shot on every line: a message that starts with it says it once
@@ -613,8 +618,6 @@ def run_batch(
     make_parent(out / REPORT_NAME, "-o")
     remove_stale_temps(out)
 
-    extra_inputs = [Path(p) for p in (options.robot, options.set_file, options.lens)
-                    if p is not None]
     wanted = json.loads(json.dumps(recorded_options(options)))  # as read back from a summary
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
@@ -632,10 +635,13 @@ def run_batch(
                 error="ShotFileError",
             )
             continue
-        inputs = [Path(shot), *extra_inputs]
+        # every file the run reads (the shot, the USD layers it uses, the robot, set and lens
+        # files): an edited sublayer makes the take out of date too
+        inputs = [path for path, _ in files_read([shot], options)]
         if not force and _up_to_date(outputs, inputs):
             previous = _read_summary(summary)
-            if previous.get(OPTIONS_KEY) == wanted:
+            if (previous.get(OPTIONS_KEY) == wanted
+                    and previous.get(SOURCE_KEY) == os.path.realpath(shot)):
                 results[i] = ShotResult(
                     shot,
                     str(mcap),

@@ -62,7 +62,7 @@ import click
 
 from camtraj import __version__, jsonsafe
 from camtraj.batch import output_names
-from camtraj.errors import CamtrajError, InputError, failure_lines
+from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
 from camtraj.folders import check_can_make
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
@@ -668,7 +668,13 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
     rig = os.path.normpath(base / task["rig_layer"]) if task.get("rig_layer") else None
     # the MCAP, the summary and the rig layer are one result: all written or none (a failed
     # task leaves every file as it was)
-    result: dict[str, Any] = convert(shot, output, options, summary_path=summary, rig_layer=rig)
+    try:
+        result: dict[str, Any] = convert(shot, output, options, summary_path=summary,
+                                         rig_layer=rig)
+    except InfeasibleError as exc:  # the log names its shot, as a task that succeeds does (a
+        # bad input's message names its file already)
+        exc.add_note(f"task {index} of {one_line(path.name)}: the shot {one_line(shot)}")
+        raise
     return result
 
 
@@ -807,7 +813,8 @@ def export_command(
                 name=name,
                 rig_layers=rig_layers,
             )
-            click.echo(f"wrote {path} ({len(shots)} task(s)); run it here with: openjd run {path}")
+            click.echo(f"wrote {path} ({len(shots)} task(s)); run it here with: openjd run "
+                       f"{shlex.quote(str(path))}")
         else:
             path, manifest = export_opencue(
                 shots,

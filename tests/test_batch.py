@@ -424,3 +424,57 @@ def test_usd_flag_writes_rig_layers_and_counts_them_in_up_to_date(tmp_path: Path
     report = run_batch(shots[:2], out, jobs=1, options=options, rig_layers=True)
     assert [r.status for r in report.results] == ["ok", "skipped"]
     assert (out / f"{FEASIBLE[0]}.rig.usda").is_file()
+
+
+def test_a_sublayer_edit_or_another_shot_of_the_same_name_is_not_up_to_date(
+        tmp_path: Path) -> None:
+    """A take is up to date with every file its run reads, the USD layers of the shot
+    included (an edited animation sublayer was skipped), and with the shot it was made from:
+    a shot of the same name from another folder, older than the take, is converted, not
+    skipped with the other shot's take (a new user's pipeline)."""
+    from pxr import Gf, Usd, UsdGeom
+
+    def animation(path: Path, x0: float) -> None:
+        anim = Usd.Stage.CreateNew(str(path))
+        UsdGeom.SetStageMetersPerUnit(anim, 1.0)
+        UsdGeom.SetStageUpAxis(anim, UsdGeom.Tokens.z)
+        cam = UsdGeom.Camera.Define(anim, "/cam")
+        cam.CreateFocalLengthAttr(3.5)
+        move = cam.AddTranslateOp()
+        cam.AddRotateXYZOp().Set(Gf.Vec3f(80.0, 0.0, 0.0))
+        for f in range(1, 13):
+            move.Set(Gf.Vec3d(x0 + 0.02 * f, 2.0, 1.4), f)
+        anim.GetRootLayer().Save()
+
+    for folder, x0 in (("a", 3.0), ("b", 5.0)):
+        (tmp_path / folder).mkdir()
+        animation(tmp_path / folder / "anim.usda", x0)
+        stage = Usd.Stage.CreateNew(str(tmp_path / folder / "shot.usda"))
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        stage.SetStartTimeCode(1)
+        stage.SetEndTimeCode(12)
+        stage.GetRootLayer().subLayerPaths.append("anim.usda")
+        stage.GetRootLayer().Save()
+    options = build_options(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                            timing="shot")
+    out = tmp_path / "out"
+
+    def status(shot: Path) -> str:
+        report = run_batch([str(shot)], out, jobs=1, options=options)
+        assert report.exit_code == 0, report.table()
+        return report.results[0].status
+
+    shot = tmp_path / "a" / "shot.usda"
+    assert status(shot) == "ok"
+    assert status(shot) == "skipped"
+    past = time.time_ns() - 100 * 10**9
+    os.utime(shot, ns=(past, past))
+    animation(tmp_path / "a" / "anim.usda", 4.0)  # the sublayer only, now newer than the take
+    assert status(shot) == "ok"
+    other = tmp_path / "b" / "shot.usda"
+    for path in (other, tmp_path / "b" / "anim.usda"):
+        os.utime(path, ns=(past, past))
+    assert status(other) == "ok"
+    summary = json.loads((out / "shot.summary.json").read_text())
+    assert summary["shot"] == str(other)

@@ -186,6 +186,9 @@ def test_opencue_failing_frame_exits_3(tmp_path: Path) -> None:
     run = subprocess.run(commands[0], shell=True, env={**_env(), **env}, capture_output=True,
                          text=True, check=False)  # fmt: skip
     assert run.returncode == 3, run.stderr
+    # the task's log names its shot, as a task that succeeds does
+    assert f"note: task 1 of job.tasks.json: the shot {SAMPLES / 'unreachable.usda'}" in \
+        run.stderr.splitlines()
     assert not (tmp_path / "unreachable.mcap").exists()
     assert _run("farm", "run-task", str(tmp_path / "job.tasks.json"), "2").returncode == 2
 
