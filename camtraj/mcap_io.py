@@ -1576,7 +1576,11 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
             frame_times.append(float(msg.time))
     duration = (stats.message_end_time - stats.message_start_time) / _NS
     n_js = count_by_topic.get(TOPIC_JOINT_STATES, 0)
-    servo_rate = (n_js - 1) / duration if duration > 0 and n_js > 1 else None
+    servo_rate: float | None = None
+    try:  # the rate the run asked for (an optimal take's steps vary), as the summary has it
+        servo_rate = float(take_md["servo_rate_hz"])
+    except (KeyError, ValueError):  # a file without camtraj's metadata: from its stamps
+        servo_rate = (n_js - 1) / duration if duration > 0 and n_js > 1 else None
     frame_rate: float | None = None
     try:
         frame_rate = float(take_md["fps"])

@@ -515,6 +515,15 @@ def test_still_edges_keep_the_robot_still_where_the_camera_rests(
     assert 0.85 * free["max_speed"] <= still["max_speed"] <= free["max_speed"] * (1 + 1e-9)
 
 
+def test_info_says_the_servo_rate_the_summary_says(runs: dict[str, Run]) -> None:
+    """``info --json``'s servo rate is the run's, as the summary and the metadata have it,
+    also for an optimal take whose steps vary (it read 259.3 Hz off the stamps of a 250 Hz
+    take, and 240.00000002704223 for 240)."""
+    for key in ("maya_dolly_push_in", "maya_optimal"):
+        info = json.loads(run_cli("info", runs[key].mcap, "--json").stdout)
+        assert info["servo_rate_hz"] == runs[key].summary_json()["servo_rate_hz"], key
+
+
 def test_run_up_and_run_out_durations_are_the_files(runs: dict[str, Run]) -> None:
     """The summary's run-up lasts from the take's first sample to the first frame's and its
     run-out from the last frame's to the take's last (the ruckig moves plus the holds that
