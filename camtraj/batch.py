@@ -48,7 +48,7 @@ import click
 
 from camtraj import __version__, interrupts, jsonsafe
 from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
-from camtraj.folders import check_can_make, make_parent
+from camtraj.folders import check_can_make, make_parent, remove_empty
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
     ConvertOptions,
@@ -596,15 +596,12 @@ def run_batch(
         msg = f"jobs must be at least 1, got {jobs}"
         raise InputError(msg)
 
-    def shot_outputs(mcap: Path, summary: Path) -> list[Path]:
-        return [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
-
     # The workers' outputs are checked here, all together, before any shot runs: no output
     # is an input of the batch (a shot, a layer it uses, the robot or set file), no two
     # outputs are the same file.
     labels = ("-o", "--summary", "--usd")
     planned = [(p, f"{label} {one_line(p)}") for pair in names
-               for p, label in zip(shot_outputs(*pair), labels, strict=False)]
+               for p, label in zip(_shot_outputs(*pair, rig_layers), labels, strict=False)]
     refuse_overlaps([*planned, (out / REPORT_NAME, str(out / REPORT_NAME))],
                     files_read(shots, options))
 
@@ -615,14 +612,30 @@ def run_batch(
     read_shared_inputs(options)
 
     check_can_make(out / REPORT_NAME, "-o")
-    make_parent(out / REPORT_NAME, "-o")
+    made = make_parent(out / REPORT_NAME, "-o")
+    try:
+        return _run_shots(shots, names, out, options, jobs, force, progress, rig_layers, start)
+    except BaseException:  # stopped before its report: the folders it made go if still empty
+        remove_empty(made)
+        raise
+
+
+def _shot_outputs(mcap: Path, summary: Path, rig_layers: bool) -> list[Path]:
+    """The files one shot's conversion writes."""
+    return [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
+
+
+def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
+               options: ConvertOptions, jobs: int, force: bool, progress: bool,
+               rig_layers: bool, start: float) -> BatchReport:
+    """:func:`run_batch`'s work once its outputs are checked and its folder is made."""
     remove_stale_temps(out)
 
     wanted = json.loads(json.dumps(recorded_options(options)))  # as read back from a summary
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
     for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):
-        outputs = shot_outputs(mcap, summary)
+        outputs = _shot_outputs(mcap, summary, rig_layers)
         reason = _unreadable(shot)
         if reason is not None:
             results[i] = ShotResult(

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from camtraj.errors import InputError
 
-__all__ = ["check_can_make", "make_parent"]
+__all__ = ["check_can_make", "make_parent", "remove_empty"]
 
 
 def _nearest_existing(folder: Path) -> Path:
@@ -48,13 +48,18 @@ def check_can_make(path: str | os.PathLike[str], what: str = "") -> None:
         raise InputError(msg)
 
 
-def make_parent(path: str | os.PathLike[str], what: str = "") -> None:
-    """Make ``path``'s folder and its missing parents.
+def make_parent(path: str | os.PathLike[str], what: str = "") -> list[Path]:
+    """Make ``path``'s folder and its missing parents; the folders made, deepest first (for
+    :func:`remove_empty` when the run fails).
 
     Raises:
         InputError: It cannot be made (a file in the way, no permission).
     """
     folder = Path(path).parent
+    made, up = [], folder
+    while not up.exists() and up != up.parent:
+        made.append(up)
+        up = up.parent
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -62,3 +67,14 @@ def make_parent(path: str | os.PathLike[str], what: str = "") -> None:
         reason = exc.strerror or str(exc)
         msg = f"cannot write {name}: cannot make folder {folder} ({reason.lower()})"
         raise InputError(msg) from exc
+    return made
+
+
+def remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a failed run made (:func:`make_parent`'s), deepest first, where
+    they are still empty."""
+    for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
+        try:
+            folder.rmdir()
+        except OSError:
+            continue

@@ -60,7 +60,7 @@ from typing import BinaryIO
 
 from camtraj import interrupts
 from camtraj.errors import InputError
-from camtraj.folders import check_can_make, make_parent
+from camtraj.folders import check_can_make, make_parent, remove_empty
 from camtraj.inputs import one_line
 
 __all__ = [
@@ -239,12 +239,7 @@ class OutputSet:
         if folder.exists():
             return
         check_can_make(out.target, out.label)
-        missing = []
-        while not folder.exists() and folder != folder.parent:
-            missing.append(folder)
-            folder = folder.parent
-        make_parent(out.target, out.label)
-        self._made_folders.extend(missing)
+        self._made_folders.extend(make_parent(out.target, out.label))
 
     @staticmethod
     def _check_destination(out: _Output) -> None:
@@ -443,11 +438,7 @@ class OutputSet:
                         out.named.unlink()
                     out.named = None
             if not self._committed:  # a failed run leaves no empty folder behind
-                # deepest first across outputs too: --summary's a/b/ is made after -o's a/
-                for folder in sorted(self._made_folders, key=lambda f: len(f.parts),
-                                     reverse=True):
-                    with contextlib.suppress(OSError):
-                        folder.rmdir()
+                remove_empty(self._made_folders)
             self._made_folders = []
 
     def __enter__(self) -> OutputSet:

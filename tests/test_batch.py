@@ -478,3 +478,25 @@ def test_a_sublayer_edit_or_another_shot_of_the_same_name_is_not_up_to_date(
     assert status(other) == "ok"
     summary = json.loads((out / "shot.summary.json").read_text())
     assert summary["shot"] == str(other)
+
+
+def test_a_batch_stopped_before_its_report_leaves_no_folder_it_made(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A batch stopped (SIGTERM, Ctrl-C) before it writes its report removes the output
+    folders it made, where still empty (a new user's `-o out/sig/sub` stayed behind empty);
+    a folder that was there stays."""
+    import camtraj.batch as batch
+
+    def stopped(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(batch, "_run_shots", stopped)
+    options = build_options(camera=None, robot=None, placement=None, frames=None, rate=250.0,
+                            timing="shot")
+    (tmp_path / "kept").mkdir()
+    shot = str(SAMPLES / "maya_dolly_push_in.usda")
+    for out in (tmp_path / "kept" / "new" / "sub", tmp_path / "kept"):
+        with pytest.raises(KeyboardInterrupt):
+            run_batch([shot], out, jobs=1, options=options)
+    assert [p.name for p in tmp_path.iterdir()] == ["kept"]
+    assert list((tmp_path / "kept").iterdir()) == []
