@@ -39,6 +39,7 @@ import os
 import signal
 import sys
 import time
+import unicodedata
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -158,6 +159,13 @@ def output_names(shots: Sequence[str], outdir: Path) -> list[tuple[Path, Path]]:
         seen[key] = shot
         names.append((outdir / f"{path.stem}.mcap", outdir / f"{path.stem}.summary.json"))
     return names
+
+
+def _columns(text: str) -> int:
+    """How many terminal columns ``text`` takes: East Asian wide and full-width characters
+    two, combining marks none (a shot named in Japanese shifted the table by two columns)."""
+    return sum(0 if unicodedata.combining(c) else
+               2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
 
 
 def _mtime_ns(path: Path) -> int | None:
@@ -315,10 +323,11 @@ class BatchReport:
                     time_text,
                 )
             )
-        widths = [max(len(row[i]) for row in rows) for i in range(len(header) - 1)]
+        widths = [max(_columns(row[i]) for row in rows) for i in range(len(header) - 1)]
         lines = []
         for row in rows:
-            cells = [cell.ljust(w) for cell, w in zip(row[:-1], widths, strict=True)]
+            cells = [cell + " " * (w - _columns(cell))
+                     for cell, w in zip(row[:-1], widths, strict=True)]
             lines.append("  ".join([*cells, row[-1]]).rstrip())
         counts = self.to_json()["counts"]
         lines.append(

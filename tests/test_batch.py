@@ -500,3 +500,22 @@ def test_a_batch_stopped_before_its_report_leaves_no_folder_it_made(
             run_batch([shot], out, jobs=1, options=options)
     assert [p.name for p in tmp_path.iterdir()] == ["kept"]
     assert list((tmp_path / "kept").iterdir()) == []
+
+
+def test_the_table_lines_up_with_wide_characters_in_a_shot_name() -> None:
+    """A shot named in Japanese takes two terminal columns per character: the table's next
+    column starts in the same terminal column on every row (it was two to the left)."""
+    import unicodedata
+
+    from camtraj.batch import BatchReport, ShotResult
+
+    def columns(text: str) -> int:
+        return sum(2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
+
+    results = tuple(ShotResult(name, "x.mcap", "x.json", status="ok", seconds=1.0,
+                               summary={"frames": {"first": 1, "last": 24}, "max_speed": 2.0})
+                    for name in ("plano grúa ñ 日本 B.usda", "a_longer_plain_name_b.usda"))
+    table = BatchReport("out", 1, 1, 2.0, results, {}).table()
+    rows = table.splitlines()[1:3]
+    starts = [columns(row[:row.index("1-24")]) for row in rows]
+    assert starts[0] == starts[1], table
