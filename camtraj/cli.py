@@ -47,14 +47,13 @@ from camtraj.shown import (
     SHOWN_TURN_DEG,
     camera_moves,
     edge_use,
-    frame_rate,
     frame_span,
     listed,
     percent,
     scale_fit,
     seconds,
     servo,
-    speed_percent,
+    speed_text,
 )
 
 EXIT_OK, EXIT_INPUT, EXIT_INFEASIBLE = 0, 2, 3
@@ -575,8 +574,6 @@ def _limit_report(shot: str, exc: Any, options: Any) -> dict[str, Any]:
     }
 
 
-MAX_SHOWN_SPEED = 100.0
-"""Above this many times real time the report says ">10000%" (the number means nothing)."""
 SWING_NOTE_M = 1e-3
 """[m] A run-up or run-out that moves the camera further than this around a frame where the
 camera is at rest (or turns it further than :data:`SWING_NOTE_DEG`) gets a note pointing at
@@ -590,18 +587,6 @@ def _moved(part: dict[str, Any]) -> tuple[float, float]:
     return part["camera_travel_m"], part.get("camera_turn_deg", 0.0)
 
 
-def _speed_text(max_speed: float | None, feasible_fps: float | None, fps: float) -> str:
-    """'131% of real time (… 31.54 fps)'; a still camera's speed is unbounded (JSON: null)."""
-    if max_speed is None or not math.isfinite(max_speed):
-        return "unbounded (the camera pose never changes)"
-    if max_speed > MAX_SHOWN_SPEED:
-        return (f">{100 * MAX_SHOWN_SPEED:.0f}% of real time (could be shot at more than "
-                f"{frame_rate(MAX_SHOWN_SPEED * fps, 0)} fps)")
-    shown = feasible_fps if feasible_fps is not None else max_speed * fps
-    return (f"{speed_percent(max_speed)} of real time "
-            f"(could be shot at {frame_rate(shown)} fps)")
-
-
 def _verdict(r: dict[str, Any]) -> str:
     """A feasible check's last line: 'SHOT: FEASIBLE at shot timing, 206% of real time ...'."""
     timing, factor = r["timing"], r["speed_factor"]
@@ -609,7 +594,7 @@ def _verdict(r: dict[str, Any]) -> str:
            else f"{timing} timing, {factor:.3f}x slower than the shot" if factor > 1.0
            else f"{timing} timing, {1.0 / factor:.3f}x faster than the shot")
     return (f"{r['shot']}: FEASIBLE at {how}; maximum feasible speed "
-            f"{_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}")
+            f"{speed_text(r['max_speed'], r['fps'], r['feasible_fps'])}")
 
 
 def _pct(x: float) -> str:
@@ -668,7 +653,7 @@ def _failure_text(r: dict[str, Any]) -> str:
             fps = r["feasible_fps"] / speed
             advice = (f"; try --timing scale: the move {scale_fit(factor, fps)}"
                       if factor is not None and r["timing"] != "scale" else "")
-            lines.append(f"  maximum feasible speed {_speed_text(speed, r['feasible_fps'], fps)}"
+            lines.append(f"  maximum feasible speed {speed_text(speed, fps, r['feasible_fps'])}"
                          + (f", set by {r['max_speed_set_by']}" if r.get("max_speed_set_by")
                             else "") + advice)
         return "\n".join(lines)
@@ -686,7 +671,7 @@ def _take_report(r: dict[str, Any]) -> str:
         f"{seconds(r['shot_start'])}-{seconds(r['shot_end'])} s), "
         f"speed factor {r['speed_factor']:.3f}, "
         f"{servo(r['servo_rate_hz'], r.get('servo_step_ms'))}",
-        f"  maximum feasible speed {_speed_text(r['max_speed'], r['feasible_fps'], r['fps'])}"
+        f"  maximum feasible speed {speed_text(r['max_speed'], r['fps'], r['feasible_fps'])}"
         + (f", set by {r['max_speed_set_by']}" if r.get("max_speed_set_by") else ""),
         *([f"  placement {placement_text(r['placement'])}"]
           if r["placement"]["source"] != DEFAULT_SOURCE else []),

@@ -46,7 +46,7 @@ from camtraj.options import EDGE_OPTIONS, TIMING_MODES, timing_edges
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon, yaw_pose
-from camtraj.shown import TABLE_MAX_SPEED, speed_percent
+from camtraj.shown import MAX_SHOWN_SPEED, speed_percent
 from camtraj.timing import Limits, TimingLimitError, time_shot
 
 if TYPE_CHECKING:
@@ -61,7 +61,6 @@ REFINE = ((2, 0.5), (2, 0.25), (1, 0.125))  # (best placements refined, fraction
 FULL_KEEP = 3  # placements solved on every frame (at least; --top more)
 SCENE_FULL_KEEP = 2  # a scene's placements raced on every frame (the best solved for all)
 YAW_STEP_DEG = 15.0
-_SPEED_CAP = 100.0
 
 
 def _solve(robot: Robot, flange2base: Array, problem: Problem, frame_interval: float,
@@ -123,7 +122,9 @@ class Result:
         m = self.margins
         margin = min(1.0 - m.get("limits_use", 1.0), m.get("wrist_deg", 0.0) / 90.0,
                      m.get("stretch_deg", 0.0) / 180.0)
-        speed = math.floor(100.0 * min(self.max_speed, _SPEED_CAP)) if self.max_speed > 0 else 0
+        # speeds above what is shown tie (to 1%: the tables' rounding)
+        speed = (math.floor(100.0 * min(self.max_speed, MAX_SHOWN_SPEED)) if self.max_speed > 0
+                 else 0)
         return (self.reachable, float(self.collision_free), float(self.feasible), speed, margin)
 
     def base2world(self, z: float) -> Array:
@@ -769,7 +770,7 @@ def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
              f"in {report.seconds:.1f} s (floor z {report.base_z:.3f} m)",
-             "  #     x [m]     y [m]  yaw [deg]  speed  limits use  wrist  stretch  obstacle"
+             "  #     x [m]     y [m]  yaw [deg]    speed  limits use  wrist  stretch  obstacle"
              "  set by",
              f"  ({LIMITS_USE}; wrist, stretch: margins)"]
     for i, r in enumerate(report.results, 1):
@@ -783,11 +784,11 @@ def columns(r: Result) -> str:
     """A result's speed, limits use, margins, obstacle distance and what sets the speed
     (the timing stage's ``set_by``, as convert says it) columns."""
     m = r.margins
-    speed = speed_percent(min(r.max_speed, TABLE_MAX_SPEED)) if r.max_speed > 0 else "-"
+    speed = speed_percent(r.max_speed) if r.max_speed > 0 else "-"
     obst = m.get("obstacle_m")
     ob = "       -" if obst is None else ("   clear" if not math.isfinite(obst)
                                           else f"{obst:6.2f} m")
-    return (f"{speed:>5}  {100 * m.get('limits_use', 1.0):9.0f}%  "
+    return (f"{speed:>7}  {100 * m.get('limits_use', 1.0):9.0f}%  "
             f"{m.get('wrist_deg', 0.0):4.0f}°  {m.get('stretch_deg', 0.0):6.0f}°  {ob}"
             f"  {r.binding or '-'}")
 

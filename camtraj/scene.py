@@ -53,7 +53,7 @@ from camtraj.place import (
     with_clearance,
 )
 from camtraj.set_file import SetFile
-from camtraj.shown import TABLE_MAX_SPEED, speed_percent
+from camtraj.shown import speed_percent
 
 _SCENE_KEYS = {"name", "set_file", "shot"}
 _SHOT_KEYS = {"path", "camera", "frames", "timing"}
@@ -421,7 +421,7 @@ def smallest_split(n: int, cheap: Callable[[tuple[int, ...]], bool],
 # For people
 # ---------------------------------------------------------------------------------------------
 
-HEADER = ("  shot                      speed  limits use  wrist  stretch  obstacle  set by")
+HEADER = ("  shot                        speed  limits use  wrist  stretch  obstacle  set by")
 
 
 def _rows(report: SceneReport, lay: Layout) -> list[str]:
@@ -469,4 +469,4 @@ def split_text(report: SceneReport) -> str:
 
 
 def _speed(speed: float) -> str:
-    return speed_percent(min(speed, TABLE_MAX_SPEED))
+    return speed_percent(speed)

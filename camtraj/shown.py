@@ -14,9 +14,9 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "SHOWN_RUNS", "SHOWN_TURN_DEG", "TABLE_MAX_SPEED", "camera_moves",
+__all__ = ["EDGE_QUANTITIES", "MAX_SHOWN_SPEED", "SHOWN_RUNS", "SHOWN_TURN_DEG", "camera_moves",
            "distance", "edge_use", "frame_rate", "frame_runs", "frame_span", "listed", "percent",
-           "scale_fit", "seconds", "servo", "speed_percent"]
+           "scale_fit", "seconds", "servo", "speed_percent", "speed_text"]
 
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
@@ -110,13 +110,16 @@ def servo(rate_hz: float, step_ms: tuple[float, float] | None) -> str:
     return f"servo {rate_hz:.1f} Hz"
 
 
-TABLE_MAX_SPEED = 99.99
-"""The fastest speed place's tables show (9999%: their column is five wide)."""
+MAX_SHOWN_SPEED = 100.0
+"""Above this many times real time a maximum feasible speed shows as '>10000%' (the number
+means nothing on set), in the terminal, the report, batch's and place's tables alike."""
 
 
 def speed_percent(x: float) -> str:
     """The maximum feasible speed as % of real time, rounded down: '206%'; below 1%, to two
-    significant digits ('0.29%', not '0%')."""
+    significant digits ('0.29%', not '0%'); above :data:`MAX_SHOWN_SPEED`, '>10000%'."""
+    if x > MAX_SHOWN_SPEED:
+        return f">{100 * MAX_SHOWN_SPEED:.0f}%"
     p = 100.0 * x
     if p >= 1.0 or p <= 0.0:
         return f"{math.floor(p)}%"
@@ -129,6 +132,19 @@ def frame_rate(fps: float, digits: int = 2) -> str:
     """A frame rate a take fits at, rounded down (a rate said to fit does fit): '19.06'."""
     scale = 10.0**digits
     return f"{math.floor(fps * scale * (1.0 + 1e-12)) / scale:.{digits}f}"
+
+
+def speed_text(max_speed: float | None, fps: float, feasible_fps: float | None = None) -> str:
+    """'131% of real time (could be shot at 31.54 fps)' for a take of ``fps`` frames per
+    second (``feasible_fps``: the rate the file records, where it does); a still camera's
+    speed (None or infinite) is unbounded; above :data:`MAX_SHOWN_SPEED`, a bound."""
+    if max_speed is None or not math.isfinite(max_speed):
+        return "unbounded (the camera pose never changes)"
+    if max_speed > MAX_SHOWN_SPEED:
+        return (f"{speed_percent(max_speed)} of real time (could be shot at more than "
+                f"{frame_rate(MAX_SHOWN_SPEED * fps, 0)} fps)")
+    shown = feasible_fps if feasible_fps is not None else max_speed * fps
+    return f"{speed_percent(max_speed)} of real time (could be shot at {frame_rate(shown)} fps)"
 
 
 def edge_use(runup: Mapping[str, Mapping[str, float]], runout: Mapping[str, Mapping[str, float]],

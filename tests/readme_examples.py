@@ -28,7 +28,9 @@ how many there are. A block of a move faster than the robot can move more: the a
 not limit its speed settle where the refinement's tolerance leaves them, and another CPU's
 round-off can pick another of two nearly equally fast answers (the whip under SSE-only
 kernels: the elbow's jerk use 67% -> 69%). Such a block says how far, in a comment on the line
-before its fence: ``<!-- round-off: 5% -->``.
+before its fence: ``<!-- round-off: 5% -->``. A block whose command says how long it took
+(``camtraj place``: "in 11.5 s") says so there too, ``<!-- clock -->`` (both:
+``<!-- round-off: 5%; clock -->``): a duration after "in " is the clock's, not compared.
 """
 
 from __future__ import annotations
@@ -48,8 +50,9 @@ DOCUMENTS = (ROOT / "README.md", ROOT / "pipelines" / "README.md")
 REGENERATE = "make readme"
 """How to bring the examples up to date (the command the test's failure message names)."""
 
-_FENCE = re.compile(r"^(?:<!-- round-off: (\d+(?:\.\d+)?)% -->\n)?```console\n(.*?)^```\n",
-                    re.MULTILINE | re.DOTALL)
+_FENCE = re.compile(r"^(?:<!-- ([^>]*) -->\n)?```console\n(.*?)^```\n", re.MULTILINE | re.DOTALL)
+_ROUND_OFF = re.compile(r"round-off: (\d+(?:\.\d+)?)%")
+_CLOCK = re.compile(r"\bin $")  # a number after this, with " s" after it, is an elapsed time
 PROMPT = "$ "
 
 
@@ -70,6 +73,7 @@ class Block:
     end: int
     text: str
     rtol: float = NUMBER_RTOL  # how far a measured number may move (:func:`agrees`)
+    clock: bool = False  # its output says how long a command took (:func:`agrees`)
 
     @property
     def line(self) -> int:
@@ -88,9 +92,14 @@ class Block:
 def blocks(document: Path) -> list[Block]:
     """The console blocks of ``document``, in order."""
     text = document.read_text(encoding="utf-8")
-    return [Block(document, m.start(2), m.end(2), m.group(2),
-                  NUMBER_RTOL if m.group(1) is None else float(m.group(1)) / 100.0)
-            for m in _FENCE.finditer(text)]
+    out = []
+    for m in _FENCE.finditer(text):
+        note = m.group(1) or ""
+        rtol = _ROUND_OFF.search(note)
+        out.append(Block(document, m.start(2), m.end(2), m.group(2),
+                         NUMBER_RTOL if rtol is None else float(rtol.group(1)) / 100.0,
+                         "clock" in note.split(";") or note.strip() == "clock"))
+    return out
 
 
 def _argv(command: str, where: str) -> list[str]:
@@ -126,10 +135,10 @@ _NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
 _UNIT_AFTER = re.compile(r" ?(?:%|x\b|m\b|mm\b|deg|s\b|ms\b|µ)")  # not fps, Hz: settings
 
 
-def agrees(expected: str, got: str, rtol: float = NUMBER_RTOL) -> bool:
+def agrees(expected: str, got: str, rtol: float = NUMBER_RTOL, clock: bool = False) -> bool:
     """Whether a transcript is the expected one up to round-off: the same lines and words,
     each measured number within one unit of its last printed digit or :data:`NUMBER_RTOL` of
-    it, every bare whole number the same."""
+    it, every bare whole number the same; with ``clock``, a duration after "in " any value."""
     if expected == got:
         return True
     old, new = expected.splitlines(), got.splitlines()
@@ -144,6 +153,9 @@ def agrees(expected: str, got: str, rtol: float = NUMBER_RTOL) -> bool:
         if len(xs) != len(ys):
             return False
         for x, y in zip(xs, ys, strict=True):
+            if (clock and _CLOCK.search(a, 0, x.start())
+                    and a.startswith(" s", x.end()) and b.startswith(" s", y.end())):
+                continue  # how long it took: the machine's, not camtraj's
             measured = x.group(1) is not None or _UNIT_AFTER.match(a, x.end()) is not None
             if not measured:
                 if x.group(0) != y.group(0):  # a frame number, a count: exactly
@@ -174,7 +186,8 @@ def check(documents: tuple[Path, ...] = DOCUMENTS, *, write: bool = False) -> li
         for block in reversed(found):  # rewriting from the end keeps earlier offsets valid
             with tempfile.TemporaryDirectory(prefix="camtraj-readme-") as work:
                 got = run_block(block, Path(work))
-            if got == block.text or (not write and agrees(block.text, got, block.rtol)):
+            if got == block.text or (not write and agrees(block.text, got, block.rtol,
+                                                          block.clock)):
                 continue
             here.append(diff(block, got))
             text = text[:block.start] + got + text[block.end:]

@@ -19,6 +19,7 @@ as ``python -m camtraj`` to show that both agree.
 
 from __future__ import annotations
 
+import html
 import json
 import math
 import os
@@ -555,6 +556,11 @@ def test_nearly_still_camera_caps_the_speed_shown(tmp_path: Path) -> None:
     line = next(x for x in proc.stdout.splitlines() if "maximum feasible speed" in x)
     assert ">10000% of real time" in line, line
     assert max(int(n) for n in re.findall(r"\d+", line)) <= 10000 * 24, line
+    page = tmp_path / "nearly.html"  # the report says what the terminal says
+    proc = run_cli("convert", shot, "-o", tmp_path / "nearly.mcap", "--report", page)
+    assert proc.returncode == 0, proc.stderr
+    said = html.escape(line.split("maximum feasible speed ")[1], quote=False)
+    assert said in page.read_text(encoding="utf-8")
     jitter = run_cli("check", _still_shot(tmp_path / "jitter.usda", 1e-9))
     assert "maximum feasible speed unbounded (the camera pose never changes)" in jitter.stdout
 

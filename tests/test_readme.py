@@ -26,12 +26,15 @@ def test_the_readme_has_examples() -> None:
     # the whip's two blocks carry <!-- round-off: 5% --> (a move faster than the robot)
     loose = [b for b in EXAMPLES if b.rtol != 0.01]
     assert len(loose) == 2 and all(b.rtol == 0.05 and "whip_pan" in b.text for b in loose)
+    # place's says how long its search took
+    timed = [b for b in EXAMPLES if b.clock]
+    assert len(timed) == 1 and timed[0].commands[0].startswith("camtraj place")
 
 
 @pytest.mark.parametrize("block", EXAMPLES, ids=[b.name for b in EXAMPLES])
 def test_example_output_is_what_camtraj_prints(block: Block, tmp_path: Path) -> None:
     got = run_block(block, tmp_path)
-    if not agrees(block.text, got, block.rtol):
+    if not agrees(block.text, got, block.rtol, block.clock):
         pytest.fail(
             f"the README example at {block.name} differs from what camtraj prints now (a solver "
             f"change moves numbers): run `{REGENERATE}` to rewrite every example, read the diff, "
@@ -92,3 +95,9 @@ def test_round_off_agrees_and_a_real_change_does_not() -> None:
     assert agrees("elbow 85%  67%  26.636\n", "elbow 85%  69%  26.798\n", 0.05)
     assert not agrees("elbow 85%  67%  26.636\n", "elbow 85%  69%  26.798\n")
     assert not agrees("frames 16-24\n", "frames 16-25\n", 0.05)
+    # a block marked <!-- clock -->: how long the search took is the machine's
+    timed = "x.usda: 59 placements solved, 37392 screened, in 11.5 s (floor z 0.000 m)\n"
+    later = "x.usda: 59 placements solved, 37392 screened, in 21.1 s (floor z 0.000 m)\n"
+    assert agrees(timed, later, clock=True) and not agrees(timed, later)
+    assert not agrees(timed, later.replace("59", "58"), clock=True)
+    assert not agrees("speed 3.5 s\n", "speed 4.5 s\n", clock=True)  # only after "in "

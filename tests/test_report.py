@@ -612,6 +612,17 @@ def test_a_speed_below_one_percent_is_not_shown_as_zero() -> None:
     assert speed_percent(0.000123) == "0.012%" and speed_percent(0.0) == "0%"
 
 
+def test_a_speed_above_a_hundred_times_real_time_shows_as_a_bound() -> None:
+    """One rule for every output (terminal, report, batch's and place's tables): above 100x
+    real time, '>10000%' (the report had printed 15000% where the terminal said >10000%)."""
+    from camtraj.shown import speed_percent, speed_text
+
+    assert speed_percent(100.0) == "10000%" and speed_percent(150.0) == ">10000%"
+    assert speed_text(150.0, 24.0) == ">10000% of real time (could be shot at more than 2400 fps)"
+    assert speed_text(2.069, 24.0, 49.66) == "206% of real time (could be shot at 49.66 fps)"
+    assert speed_text(math.inf, 24.0).startswith("unbounded")
+
+
 def _ends_cells(page: str) -> dict[str, list[str]]:
     rows = re.findall(r"<td><a href='#axis-(\w+)'>\w+</a></td>(.*?)</tr>", page)
     return {axis: re.findall(r"<td class='num ends'>([^<]+)</td>", row) for axis, row in rows}

@@ -19,12 +19,11 @@ from camtraj.shown import (
     EDGE_QUANTITIES,
     camera_moves,
     edge_use,
-    frame_rate,
     frame_span,
     percent,
     seconds,
     servo,
-    speed_percent,
+    speed_text,
 )
 
 # ---------------------------------------------------------------------------------------------
@@ -87,9 +86,7 @@ def _facts(data: ReportData) -> list[tuple[str, str]]:
                      f"{seconds(data.shot_start)}-{seconds(data.shot_end)} s"),
         ]
     if math.isfinite(data.max_speed):
-        rows.append(("maximum feasible speed",
-                     f"{speed_percent(data.max_speed)} of real time (could be shot at "
-                     f"{frame_rate(data.fps * data.max_speed)} fps)"
+        rows.append(("maximum feasible speed", speed_text(data.max_speed, data.fps)
                      + (f", set by {data.max_speed_set_by}" if data.max_speed_set_by else "")))
     elif data.status not in ("unreachable", "lens_range"):
         rows.append(("maximum feasible speed", "not recorded in this file"))
