@@ -1041,7 +1041,11 @@ _USD_MAGICS = {b"#usda": "USD text (usda)", b"PXR-USDC": "USD crate (usdc)"}
 
 
 def _open_for_reading(path: Path) -> IO[bytes]:
-    """Open an MCAP file; a file that is not one (a shot given by mistake) is an InputError."""
+    """Open an MCAP file; a file that is not one (a shot given by mistake, a named pipe, which
+    would block the read) is an InputError."""
+    from camtraj.inputs import require_regular_file
+
+    require_regular_file(path, "MCAP file", InputError)
     try:
         stream = path.open("rb")
         head = stream.read(len(_MCAP_MAGIC))

@@ -849,3 +849,24 @@ def test_both_readers_refuse_a_take_without_its_messages(
     for reader in (read_take, mcap_io.read_take_for_report):
         with pytest.raises(InputError, match=re.escape(words)):
             reader(bad)
+
+
+def test_every_reader_refuses_a_named_pipe_instead_of_blocking(tmp_path: Path) -> None:
+    """The MCAP readers check the path themselves (the CLI's own check covered only info
+    and report): a named pipe with no writer would block the read forever."""
+    import signal
+
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    readers = (mcap_io.read_take, mcap_io.describe,
+               lambda p: mcap_io.read_take_for_report(p, lambda take: take.t[:1]))
+    old = signal.signal(signal.SIGALRM, lambda *_: pytest.fail("the read blocked"))
+    try:
+        for read in readers:
+            signal.alarm(20)
+            with pytest.raises(InputError, match="MCAP file is a named pipe"):
+                read(fifo)
+            signal.alarm(0)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
