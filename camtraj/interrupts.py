@@ -44,7 +44,6 @@ __all__ = [
     "ignore_from_now",
     "install",
     "interruption",
-    "requested",
 ]
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -130,11 +129,6 @@ def _set_handlers(handler: signal.Handlers | Callable[[int, FrameType | None], N
                 # changing the handler. It was ignored, as asked: set the handler again.
                 continue
             break
-
-
-def requested() -> int | None:
-    """The signal number of a stop requested so far, else None."""
-    return _state.pending
 
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:

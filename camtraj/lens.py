@@ -188,7 +188,6 @@ class Lens:
     source: str
     axes: tuple[LensAxis, ...]
     focal_length_mm: float | None = None
-    angle_unit: str = "deg"
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Lens:
@@ -490,7 +489,7 @@ def lens_from_table(data: dict[str, Any], *, where: str, source: str, prefix: st
     r.no_unknown(controllers, {a.name for a in axes}, "controller")
     if controllers:
         axes = tuple(_with_controller(r, controllers, a) for a in axes)
-    return Lens(name=name, source=source, axes=axes, focal_length_mm=focal, angle_unit=unit)
+    return Lens(name=name, source=source, axes=axes, focal_length_mm=focal)
 
 
 def _axis(r: _Reader, tab: dict[str, Any], axis: str, ang: float) -> LensAxis:

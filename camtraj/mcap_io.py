@@ -1342,7 +1342,7 @@ def _read_for_report(
 
     # /tf at the times asked for: the nearest message by log time, decoded alone.
     wanted = np.asarray(tf_at(frame_times), dtype=float) if tf_at is not None else np.zeros(0)
-    tf_msgs = [m for m in (_nearest_tf(reader, summary, w) for w in wanted) if m is not None]
+    tf_msgs = [m for m in (_nearest_tf(reader, w) for w in wanted) if m is not None]
     tf: dict[str, tuple[str, Array]] = {}
     for j, msg_ in enumerate(tf_msgs):
         for tr in msg_.transforms:
@@ -1369,7 +1369,7 @@ def _read_for_report(
     )
 
 
-def _nearest_tf(reader: Any, summary: Any, when: float) -> Any:
+def _nearest_tf(reader: Any, when: float) -> Any:
     """The decoded /tf message whose log time is nearest ``when`` [s] (the first of equals):
     looked for within a second, then in the whole topic; None without /tf messages."""
     if not math.isfinite(when):

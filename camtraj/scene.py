@@ -273,7 +273,7 @@ def place_scene(
             if one is not None:  # a group's placement serves the whole scene after all
                 layout, reason, split = one, "", None
             elif split is None:
-                msg = _no_split(shots, group_search, cheap)
+                msg = _no_split(shots, group_search)
                 raise PlacementError(msg)
     except InfeasibleError as exc:  # what reading the shots warned of is often why
         exc.shot_warnings = tuple(warned)
@@ -335,8 +335,7 @@ def _best_ok(group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, 
 
 
 def _no_split(shots: Sequence[SceneShot],
-              group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]],
-              cheap: Callable[[tuple[int, ...]], bool]) -> str:
+              group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]]) -> str:
     """Why no split works: the first shot that no placement can do on its own."""
     for i, s in enumerate(shots):
         try:

@@ -56,8 +56,6 @@ svg { width: 100%; height: auto; display: block; }
 footer { margin-top: 2rem; font-size: 0.8rem; color: #777; }
 """
 
-_UNITS = {"position": "", "velocity": "/s", "acceleration": "/s²", "jerk": "/s³"}
-
 
 def _e(text: object) -> str:
     return html.escape(str(text), quote=True)

@@ -233,16 +233,6 @@ class FramePath:
         out: Array = 6.0 * c[:, 3] + 24.0 * c[:, 4] + 60.0 * c[:, 5]
         return out
 
-    def timed(self, x: Array, xd: Array, xdd: Array, *, jerk_by_difference: bool = False,
-              t: Array | None = None) -> Samples:
-        """Time derivatives for a time law x(t) given as x, dx/dt, d²x/dt² at each sample.
-
-        ``xd`` is in frames per second. Jerk is exact when ``dx/dt`` is constant; with
-        ``jerk_by_difference`` it is the forward difference of the acceleration over the
-        sample times ``t`` (for time laws whose path acceleration jumps).
-        """
-        return _timed(self.at(x), xd, xdd, jerk_by_difference=jerk_by_difference, t=t)
-
     def timed_grid(self, ticks: int, xd: float) -> tuple[Array, Samples]:
         """Samples at constant path speed ``xd`` [frames/s] on ``ticks`` steps per frame."""
         x, (p0, p1, p2, p3) = self.on_grid(ticks)
@@ -250,29 +240,6 @@ class FramePath:
         p2 *= xd**2
         p3 *= xd**3
         return x, Samples(q=p0, qd=p1, qdd=p2, qddd=p3)
-
-
-def _timed(p: list[Array], xd: Array, xdd: Array, *, jerk_by_difference: bool = False,
-           t: Array | None = None) -> Samples:
-    p0, p1, p2, p3 = p
-    xd_ = xd[:, None]
-    xdd_ = xdd[:, None]
-    qd = p1 * xd_
-    qdd = p2 * xd_**2 + p1 * xdd_
-    if jerk_by_difference:
-        if t is None:  # pragma: no cover - internal misuse
-            msg = "jerk by difference needs the sample times"
-            raise ValueError(msg)
-        qddd = np.empty_like(qdd)
-        if t.size > 1:
-            fd = np.diff(qdd, axis=0) / np.diff(t)[:, None]
-            qddd[:-1] = fd
-            qddd[-1] = fd[-1]
-        else:
-            qddd[:] = 0.0
-    else:
-        qddd = p3 * xd_**3 + 3.0 * p2 * xd_ * xdd_
-    return Samples(q=p0, qd=qd, qdd=qdd, qddd=qddd)
 
 
 def end_jerk(q: Array, still: BoolArray) -> Array:

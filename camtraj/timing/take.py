@@ -437,7 +437,7 @@ class _RealTime:
         path = FramePath.fit(q, dt, limits.lower, limits.upper, hold, rest)
         ticks = max(1, round(rate * dt))
         grid = _Grid.of(path, ticks, 1.0 / dt)
-        fit = _EdgeFit.of(path, grid.stream, limits, edges, start, frames)
+        fit = _EdgeFit.of(grid.stream, limits, edges, start, frames)
         # The smallest uniform slow-down at which the shot and its run-up and run-out fit.
         peaks = grid.peaks()
         shot_need = peaks_slowdown(peaks, limits)
@@ -447,7 +447,7 @@ class _RealTime:
         if edges == "gentle" and need > shot_need * (1.0 + LIMIT_RTOL):
             # Gentle ends are worth a little speed, not a take that cannot run at real
             # time: beyond that the ends use the full limits (:func:`ends_to_use`).
-            fast = _EdgeFit.of(path, grid.stream, limits, "fast", start, frames)
+            fast = _EdgeFit.of(grid.stream, limits, "fast", start, frames)
             fast_need = fast.factor(shot_need, precision)
             if ends_to_use(need, fast_need) == "fast":
                 problem = fit.problem(fast_need)  # the gentle ends at the take's speed
@@ -674,7 +674,7 @@ class _EdgeFit:
     frames: tuple[int, int]
 
     @classmethod
-    def of(cls, path: FramePath, rt: Samples, limits: Limits, edges: str, start: Array | None,
+    def of(cls, rt: Samples, limits: Limits, edges: str, start: Array | None,
            frames: IntArray) -> _EdgeFit:
         # copies: a view would keep the whole stream alive
         ends = ((rt.q[0].copy(), rt.qd[0].copy(), rt.qdd[0].copy()),
