@@ -37,7 +37,6 @@ Array = NDArray[np.float64]
 GPRIMS = ("Cube", "Sphere", "Cylinder", "Capsule", "Cone")
 SUBFRAMES = 4  # obstacle poses sampled per frame
 NEAR = 0.1  # [m] distances are measured exactly this far beyond the clearance
-_YUP2ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 @dataclass(frozen=True)
@@ -121,9 +120,11 @@ class Contact:
 # ---------------------------------------------------------------------------------------------
 
 
-def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...],
-                   time_codes: Array) -> list[Obstacle]:
-    """The obstacles the patterns name on the stage, posed over ``time_codes`` (the frames).
+def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...], time_codes: Array,
+                   stage2world: Array) -> list[Obstacle]:
+    """The obstacles the patterns name on the stage, posed over ``time_codes`` (the frames),
+    in the world [m] (``stage2world``: :func:`camtraj.usd_shot.stage_to_world` of the shot's
+    units and up axis, as the shot was read).
 
     Raises:
         InputError: A pattern matches no prim, or a matched prim holds no geometry.
@@ -136,9 +137,8 @@ def read_obstacles(stage_path: str | Path, patterns: tuple[str, ...],
     if not stage:
         msg = f"{stage_path}: USD could not open the file"
         raise ShotFileError(msg)
-    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     convert = np.eye(4)
-    convert[:3, :3] = (_YUP2ZUP if str(UsdGeom.GetStageUpAxis(stage)) == "Y" else np.eye(3)) * mpu
+    convert[:3, :3] = stage2world
     tcs = np.asarray(time_codes, dtype=float)
     fine = np.unique(np.concatenate(
         [tcs[0] + (tcs[-1] - tcs[0]) * np.linspace(0, 1, SUBFRAMES * (len(tcs) - 1) + 1), tcs]))
@@ -620,6 +620,7 @@ def check_take(
     base2world: Array,
     take: Any,
     shot_time_codes: Array,
+    stage2world: Array,
     patterns: tuple[str, ...],
     clearance: float,
     floor_z: float | None = None,
@@ -629,13 +630,14 @@ def check_take(
     Args:
         take: A :class:`camtraj.timing.Take` (its servo samples are checked).
         shot_time_codes: (n,) stage time code of every film frame.
+        stage2world: The shot's stage coordinates to the world (:func:`read_obstacles`).
         floor_z: The floor's height [m] (see :class:`CollisionModel`).
 
     Raises:
         CollisionError: Closer than ``clearance`` somewhere (names frame, link, prim, depth).
         InputError: A pattern matches nothing.
     """
-    obstacles = read_obstacles(shot_path, patterns, shot_time_codes)
+    obstacles = read_obstacles(shot_path, patterns, shot_time_codes, stage2world)
     model = CollisionModel(robot, obstacles, floor_z)
     q = take.q[:, :len(robot.joint_names)]  # the joints (a lens's motors move no link)
     idx = take_samples(robot, q, take.frame_samples)

@@ -48,7 +48,7 @@ from camtraj.set_file import SetFile
 from camtraj.shown import frame_runs, frame_span
 from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
 from camtraj.timing.path import REST_NAMES, runs
-from camtraj.usd_shot import Shot, read_shot
+from camtraj.usd_shot import Shot, read_shot, stage_to_world
 
 Array = NDArray[np.float64]
 
@@ -333,7 +333,9 @@ def _solve_and_time(analysis: Analysis, shot_path: str | Path, options: ConvertO
         clearance = set_file.clearance_m if options.clearance is None else options.clearance
         with _stage(timings, "collision"):
             closest = check_take(shot_path, robot, analysis.placement.base2world, analysis.take,
-                                 shot.time_codes, set_file.prims, clearance,
+                                 shot.time_codes,
+                                 stage_to_world(shot.meters_per_unit, shot.up_axis),
+                                 set_file.prims, clearance,
                                  floor_z=set_file.floor_height * shot.meters_per_unit)
         analysis.collision = {"prims": list(set_file.prims), "clearance_m": clearance,
                               "closest_m": closest if math.isfinite(closest) else None,

@@ -679,6 +679,7 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
     """One shot as the search takes it (read as convert reads it), and the shot read."""
     from camtraj.collision import read_obstacles
     from camtraj.convert import load_shot
+    from camtraj.usd_shot import stage_to_world
 
     shot = load_shot(shot_path, options)
     lens_q = None
@@ -690,7 +691,8 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
         except InfeasibleError as exc:  # what reading the shot warned of is often why
             exc.shot_warnings = tuple(shot.warnings)
             raise
-    obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes)
+    obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes,
+                               stage_to_world(shot.meters_per_unit, shot.up_axis))
     base_z = sf.floor_height * shot.meters_per_unit
     problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),
                       np.array(shot.frames), np.array(shot.time_codes), base_z, rate,

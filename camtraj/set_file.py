@@ -143,15 +143,12 @@ class SetFile:
 
 
 def floor_xy(points: Array, meters_per_unit: float, up_axis: str) -> Array:
-    """Stage points (k, 3) [stage units] -> floor coordinates (k, 2) in the converted world [m].
+    """Stage points (k, 3) [stage units] -> floor coordinates (k, 2) in the converted world [m]
+    (:func:`camtraj.usd_shot.stage_to_world`: a Y-up stage's (x, y, z) becomes (x, -z, y))."""
+    from camtraj.usd_shot import stage_to_world
 
-    The same conversion as :mod:`camtraj.usd_shot`: scale by ``metersPerUnit``; a Y-up stage's
-    (x, y, z) becomes (x, -z, y) in the Z-up world.
-    """
-    p = np.asarray(points, dtype=float) * meters_per_unit
-    if up_axis == "Y":
-        return np.stack([p[:, 0], -p[:, 2]], axis=1)
-    return p[:, :2].copy()
+    p = np.asarray(points, dtype=float) @ stage_to_world(meters_per_unit, up_axis).T
+    return np.asarray(p[:, :2].copy())
 
 
 MAX_FLOOR_M = 1.0e6

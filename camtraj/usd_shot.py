@@ -58,13 +58,21 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdRender
 from camtraj.errors import ShotFileError, frame_ranges
 from camtraj.shown import frame_span
 
-__all__ = ["YUP2ZUP", "Shot", "list_cameras", "read_shot"]
+__all__ = ["YUP2ZUP", "Shot", "list_cameras", "read_shot", "stage_to_world"]
 
 logger = logging.getLogger(__name__)
 
 YUP2ZUP: NDArray[np.float64] = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """(3, 3) rotation from Y-up stage coordinates to Z-up: +90° about X."""
 YUP2ZUP.setflags(write=False)
+
+
+def stage_to_world(meters_per_unit: float, up_axis: str) -> NDArray[np.float64]:
+    """The linear map (3, 3) from a stage's coordinates [stage units] to the world camtraj
+    works in [m, Z up]: scaled by ``metersPerUnit``, a Y-up stage turned by :data:`YUP2ZUP`
+    (points of the set: obstacles, floor polygons; the camera pose is read the same way)."""
+    turn = YUP2ZUP if up_axis == "Y" else np.eye(3)
+    return np.asarray(turn * meters_per_unit)
 
 _CRATE_MAGIC = b"PXR-USDC"
 _TEXT_MAGIC = b"#usda"

@@ -15,6 +15,7 @@ from camtraj.collision import CollisionModel, Obstacle, _coal_geometry, read_obs
 from camtraj.errors import InputError
 from camtraj.robot import Robot
 from camtraj.urdf import frame_poses, link_transforms, robot_solids, static_transforms
+from camtraj.usd_shot import stage_to_world
 
 PROBE = 0.01  # radius of the probe sphere [m]
 
@@ -86,7 +87,8 @@ def yup_stage(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def obstacles(yup_stage: Path) -> dict[str, Obstacle]:
-    obs = read_obstacles(yup_stage, ("/set/*", "/moving"), np.arange(1.0, 12.0))
+    obs = read_obstacles(yup_stage, ("/set/*", "/moving"), np.arange(1.0, 12.0),
+                         stage_to_world(0.01, "Y"))
     return {o.path: o for o in obs}
 
 
@@ -135,7 +137,7 @@ def test_animated_obstacle_follows_its_transform(obstacles: dict[str, Obstacle])
 
 def test_a_pattern_matching_nothing_is_bad_input(yup_stage: Path) -> None:
     with pytest.raises(InputError, match="/nothing"):
-        read_obstacles(yup_stage, ("/nothing/*",), np.arange(1.0, 3.0))
+        read_obstacles(yup_stage, ("/nothing/*",), np.arange(1.0, 3.0), np.eye(3))
 
 
 def test_solids_hang_in_the_urdf_frames(robot: Robot) -> None:

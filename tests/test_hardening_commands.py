@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
@@ -514,9 +515,9 @@ def test_a_star_in_a_collision_pattern_stays_in_one_path_element(tmp_path: Path)
     for prim in ("/World/a/wall", "/World/a/b/wall", "/World/props/crate/lid"):
         UsdGeom.Cube.Define(stage, prim)
     stage.GetRootLayer().Save()
-    found = {o.path for o in read_obstacles(path, ("/World/*/wall",), [1.0])}
+    found = {o.path for o in read_obstacles(path, ("/World/*/wall",), [1.0], np.eye(3))}
     assert found == {"/World/a/wall"}
-    found = {o.path for o in read_obstacles(path, ("/World/props/*",), [1.0])}
+    found = {o.path for o in read_obstacles(path, ("/World/props/*",), [1.0], np.eye(3))}
     assert found == {"/World/props/crate/lid"}
 
 
@@ -533,7 +534,7 @@ def test_an_instanceable_reference_is_checked_at_each_instance(tmp_path: Path) -
         ref.GetPrim().GetReferences().AddInternalReference("/proto")
         ref.GetPrim().SetInstanceable(True)
     stage.GetRootLayer().Save()
-    obstacles = read_obstacles(path, ("/World/*",), [1.0])
+    obstacles = read_obstacles(path, ("/World/*",), [1.0], np.eye(3))
     assert sorted(float(o.poses[0, 0, 3]) for o in obstacles) == [0.0, 7.0]
 
 
