@@ -96,11 +96,11 @@ class Obstacle:
 
 GROUND_FRAMES = ("base_link", "link1", "rotate_axis")
 """The robot's frames that never change height (the rail, the carriage on the track, the
-turret turning on it): their parts stand on the floor (place stands the base on the set
-file's floor height: the rail and carriage sit below it, the turret on it) and are not
+turret turning on it): their parts stand on the floor (place lays the rail on the set file's
+floor, the base :data:`~camtraj.urdf.RAIL_HEIGHT` above it on the carriage) and are not
 checked against an obstacle that lies wholly at or below the floor, the floor itself given
 as a prim so that the arm and the camera are checked against it. Anything rising above the
-floor (a cable ramp under the carriage) is checked against them too."""
+floor (a cable ramp, a flight case across the rail) is checked against them too."""
 GROUND_TOL = 1e-3
 """[m] How far above the floor an obstacle's top may be and still count as the floor."""
 

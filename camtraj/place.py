@@ -85,7 +85,7 @@ class Problem:
     times: Array
     frames: NDArray[np.int64]
     time_codes: Array
-    base_z: float
+    floor_z: float  # the set file's floor; the base stands RAIL_HEIGHT above it, on the rail
     rate: float
     objective: str | None = None
     start: Array | None = None
@@ -95,6 +95,13 @@ class Problem:
     timing: str = "shot"  # "shot": must run at its own timing; "scale", "optimal": may slow down
     lens_q: Array | None = None  # (n, axes): the robot's lens motors per frame, timed with it
     edges: str = "still"  # convert's --edges: the run-up and run-out it will time the shot with
+
+    @property
+    def base_z(self) -> float:
+        """The base's height [m]: on the carriage, on the rail lying on the floor."""
+        from camtraj.urdf import RAIL_HEIGHT
+
+        return self.floor_z + RAIL_HEIGHT
 
 
 @dataclass(frozen=True)
@@ -184,7 +191,7 @@ def _model(problem: Problem) -> Any:
     models = _WORKER.setdefault("models", {})
     if id(problem) not in models:
         models[id(problem)] = (problem, CollisionModel(problem.robot, list(problem.obstacles),
-                                                       problem.base_z))  # the floor's height
+                                                       problem.floor_z))
     return models[id(problem)][1]
 
 
@@ -366,6 +373,7 @@ class PlaceReport:
     """What ``camtraj place`` found: the ranked placements solved on every frame."""
 
     shot: str
+    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it (Problem.base_z)
     base_z: float
     results: list[Result]
     evaluated: int
@@ -380,7 +388,8 @@ class PlaceReport:
 
     def to_json(self) -> dict[str, Any]:
         return {"shot": self.shot, "status": "ok" if self.best.ok else "infeasible",
-                "base_z": self.base_z, "placements": [r.to_json() for r in self.results],
+                "floor_z": self.floor_z, "base_z": self.base_z,
+                "placements": [r.to_json() for r in self.results],
                 "evaluated": self.evaluated, "screened": self.screened,
                 "seconds": self.seconds, "candidates_per_second": self.evaluated / self.seconds,
                 "region": self.region}
@@ -693,9 +702,9 @@ def load_problem(shot_path: str | Path, options: ConvertOptions, robot: Robot, s
             raise
     obstacles = read_obstacles(shot_path, sf.prims, shot.time_codes,
                                stage_to_world(shot.meters_per_unit, shot.up_axis))
-    base_z = sf.floor_height * shot.meters_per_unit
+    floor_z = sf.floor_height * shot.meters_per_unit
     problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),
-                      np.array(shot.frames), np.array(shot.time_codes), base_z, rate,
+                      np.array(shot.frames), np.array(shot.time_codes), floor_z, rate,
                       obstacles=tuple(obstacles),
                       clearance=sf.clearance_m if clearance is None else clearance,
                       name=one_line(shot_path), timing=timing, lens_q=lens_q,
@@ -758,7 +767,8 @@ def place(
         raise
     finally:
         runner.close()
-    return PlaceReport(str(shot_path), problem.base_z, [lay.results[0] for lay in layouts],
+    return PlaceReport(str(shot_path), problem.floor_z, problem.base_z,
+                       [lay.results[0] for lay in layouts],
                        runner.count, screened, time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
 
@@ -768,10 +778,15 @@ LIMITS_USE = ("limits use: the robot's peak position use (a lens's motors apart:
               "moves them), 0% mid-range, 100% touching a limit")
 
 
+def _heights(floor_z: float, base_z: float) -> str:
+    """'floor z 0.000 m, base 0.180 m on the rail': the floor's height and the base's."""
+    return f"floor z {floor_z:.3f} m, base {base_z:.3f} m on the rail"
+
+
 def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
-             f"in {report.seconds:.1f} s (floor z {report.base_z:.3f} m)",
+             f"in {report.seconds:.1f} s ({_heights(report.floor_z, report.base_z)})",
              "  #     x [m]     y [m]  yaw [deg]    speed  limits use  wrist  stretch  obstacle"
              "  set by",
              f"  ({LIMITS_USE}; wrist, stretch: margins)"]

@@ -43,6 +43,7 @@ from camtraj.place import (
     LIMITS_USE,
     Layout,
     Problem,
+    _heights,
     _race,
     _Runner,
     columns,
@@ -53,7 +54,7 @@ from camtraj.place import (
     with_clearance,
 )
 from camtraj.set_file import SetFile
-from camtraj.shown import speed_percent
+from camtraj.shown import frame_span, speed_percent
 
 _SCENE_KEYS = {"name", "set_file", "shot"}
 _SHOT_KEYS = {"path", "camera", "frames", "timing"}
@@ -72,7 +73,15 @@ class SceneShot:
 
     @property
     def name(self) -> str:
-        return one_line(self.path)
+        """The shot for people: its file, and its camera and frames where the scene gives
+        them (one stage file often holds several cameras: the file alone named none)."""
+        camera = f" {self.camera}" if self.camera else ""
+        frames = f" frames {frame_span(*self.frames)}" if self.frames else ""
+        return one_line(f"{self.path}{camera}{frames}")
+
+    def to_json(self) -> dict[str, Any]:
+        return {"path": self.path, "camera": self.camera,
+                "frames": list(self.frames) if self.frames else None, "timing": self.timing}
 
 
 @dataclass(frozen=True)
@@ -158,6 +167,7 @@ class SceneReport:
 
     name: str
     shots: tuple[SceneShot, ...]
+    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it
     base_z: float
     layout: Layout | None
     reason: str
@@ -174,11 +184,13 @@ class SceneReport:
 
     def to_json(self) -> dict[str, Any]:
         return {"layout": self.name, "status": "ok" if self.ok else "split",
-                "shots": [s.path for s in self.shots], "base_z": self.base_z,
+                "shots": [s.path for s in self.shots],
+                "shot_options": [s.to_json() for s in self.shots], "floor_z": self.floor_z,
+                "base_z": self.base_z,
                 "placement": None if self.layout is None else self._layout_json(self.layout),
                 "reason": self.reason,
                 "split": None if self.split is None else [
-                    {"shots": [self.shots[i].path for i in group],
+                    {"shots": [self.shots[i].path for i in group], "indices": list(group),
                      "placement": self._layout_json(lay)} for group, lay in self.split],
                 "evaluated": self.evaluated, "screened": self.screened,
                 "seconds": self.seconds, "region": self.region}
@@ -186,7 +198,9 @@ class SceneReport:
     def _layout_json(self, lay: Layout) -> dict[str, Any]:
         return {"x": lay.x, "y": lay.y, "yaw_deg": lay.yaw_deg, "ok": lay.ok,
                 "limiting_shot": self.shots[lay.limiting].path if lay.results else None,
-                "shots": [{"shot": self.shots[i].path, **lay.results[i].to_json()}
+                "limiting_index": lay.limiting if lay.results else None,
+                "shots": [{"shot": self.shots[i].path, "index": i,
+                           "camera": self.shots[i].camera, **lay.results[i].to_json()}
                           for i in sorted(lay.results)]}
 
 
@@ -280,7 +294,8 @@ def place_scene(
         raise
     finally:
         runner.close()
-    return SceneReport(name, tuple(shots), problems[0].base_z, layout, reason, split,
+    return SceneReport(name, tuple(shots), problems[0].floor_z, problems[0].base_z, layout,
+                       reason, split,
                        runner.count, screened[0], time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
 
@@ -441,8 +456,8 @@ def table(report: SceneReport) -> str:
     """The scene's placement per shot, or the split, for people."""
     n = len(report.shots)
     lines = [f"layout {report.name}: {n} shots, {report.evaluated} shot placements solved, "
-             f"{report.screened} screened, in {report.seconds:.1f} s (floor z "
-             f"{report.base_z:.3f} m)",
+             f"{report.screened} screened, in {report.seconds:.1f} s "
+             f"({_heights(report.floor_z, report.base_z)})",
              f"  ({LIMITS_USE}; wrist, stretch: margins; obstacle: closest approach)"]
     if report.ok and report.layout is not None:
         lay = report.layout

@@ -11,7 +11,7 @@ One format for what people write by hand and what ``camtraj place -o`` writes; `
     layout = "scene 12"    # the layout's name (written by a scene's `camtraj place`)
 
     [floor]                # stage units and stage axes (as the USD stage is authored)
-    height = 0.0           # the floor's up coordinate; `place` stands the base on it
+    height = 0.0           # the floor's up coordinate; `place` lays the rail on it
     region = [[0, 0, 0], [2000, 0, 0], [2000, 0, 1500], [0, 0, 1500]]   # where the track may lie
     keep_out = [[[500, 0, 500], [700, 0, 500], [700, 0, 700]]]          # polygons to keep off
 

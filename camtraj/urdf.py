@@ -273,6 +273,13 @@ class Solid(NamedTuple):
     material: str
 
 
+RAIL_HEIGHT = 0.18
+"""[m] How far the base frame (``base_link``) stands above the floor the rail lies on: the
+rail (8 cm) and the carriage on it (10 cm) are under the base (:func:`robot_solids`), so
+``place`` stands the base this high above the set file's floor (with the base on the floor
+they were sunk into it, and a flight case on the floor across the rail was 10 cm clear)."""
+
+
 def robot_solids(robot: Robot) -> list[Solid]:
     """The robot as primitive shapes: the URDF visuals and the collision model are these.
 
@@ -288,6 +295,7 @@ def robot_solids(robot: Robot) -> list[Solid]:
     x1 = dh.r10 + float(robot.upper[track]) + 0.6
     inner = max(float(robot.upper[extend]), 0.2)
     solids = [
+        # (its underside RAIL_HEIGHT below the base: the floor, where place stands it)
         Solid("rail", BASE_FRAME, "box", (x1 - x0, 0.5, 0.08), ((x0 + x1) / 2, 0.0, -0.14),
               "camtraj_rail"),
         # Carriage: link1 moves with the track but not with rotate (z up).

@@ -4,6 +4,7 @@ solids posed by the same frames as the URDF / tf."""
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import coal
@@ -14,7 +15,13 @@ from pxr import Gf, Usd, UsdGeom
 from camtraj.collision import CollisionModel, Obstacle, _coal_geometry, read_obstacles, take_samples
 from camtraj.errors import InputError
 from camtraj.robot import Robot
-from camtraj.urdf import frame_poses, link_transforms, robot_solids, static_transforms
+from camtraj.urdf import (
+    frame_poses,
+    link_transforms,
+    robot_solids,
+    robot_urdf,
+    static_transforms,
+)
 from camtraj.usd_shot import stage_to_world
 
 PROBE = 0.01  # radius of the probe sphere [m]
@@ -264,3 +271,28 @@ def test_the_floor_the_robot_stands_on_is_an_obstacle_for_the_arm_not_the_track(
     low = next(q for q in qs if min(_lowest(floor, q).values()) < -0.2)
     _, worst = floor.closest(low[None], np.ones(1), np.eye(4), 0.0)
     assert worst is not None and worst.link.split(" (")[0] not in ground and worst.distance < 0
+
+
+def test_a_case_on_the_floor_across_the_rail_collides(robot: Robot) -> None:
+    """Place stands the base on the rail lying on the floor (RAIL_HEIGHT up: the URDF's rail
+    underside), so a flight case standing on the floor across the rail goes into it (with
+    the base on the floor, the rail was sunk 10-18 cm into it and the case read 10 cm clear:
+    place laid a track through a set piece)."""
+    from camtraj.urdf import RAIL_HEIGHT
+
+    root = ET.fromstring(robot_urdf(robot))
+    vis = root.find("link[@name='base_link']/visual")
+    assert vis is not None
+    z = float(vis.find("origin").get("xyz").split()[2])  # type: ignore[union-attr]
+    depth = float(vis.find("geometry/box").get("size").split()[2])  # type: ignore[union-attr]
+    assert z - depth / 2 == pytest.approx(-RAIL_HEIGHT, abs=1e-12)  # the rail's underside
+    T = np.eye(4)
+    far_end = robot.dh.r10 + float(robot.upper[0])  # the carriage's far end: the arm is away
+    T[:3, 3] = (far_end, 0.0, 0.25)  # 50 cm tall, on the floor, across the rail
+    case = Obstacle("/case", "box", (1.2, 0.6, 0.5), np.zeros((0, 3)),
+                    np.zeros((0, 3), dtype=np.int64), np.array([1.0]), T[None], np.zeros(3), 0.72)
+    model = CollisionModel(robot, [case], floor_z=0.0)
+    on_rail = np.eye(4)
+    on_rail[2, 3] = RAIL_HEIGHT
+    dist, worst = model.closest(np.zeros((1, 8)), np.ones(1), on_rail, 0.0)
+    assert worst is not None and worst.link == "rail (base_link)" and dist[0] < -0.05

@@ -32,6 +32,7 @@ from tests.shots import base_move, placement, write_shot
 
 TRUE = (-37.0, 52.0, 121.0)  # a placement that can do the far shot (x, y [m], yaw [deg])
 HALF = 0.75  # the search region: TRUE +- HALF metres, yaw TRUE +- 15 deg
+BASE_Z = 0.18  # the base on the rail lying on the floor (height 0): the URDF's rail is 18 cm deep
 
 
 def run(*args: object) -> subprocess.CompletedProcess[str]:
@@ -95,7 +96,7 @@ def test_place_finds_a_placement_convert_takes_at_shot_timing(far: dict[str, Any
 def brute_force_speed(shot: Path, x: float, y: float, yaw: float) -> float:
     """Max feasible speed of a placement through the public pipeline (0 if it cannot)."""
     try:
-        a = analyse(shot, ConvertOptions(placement=(x, y, 0.0, yaw), timing="scale"))
+        a = analyse(shot, ConvertOptions(placement=(x, y, BASE_Z, yaw), timing="scale"))
     except CamtrajError:
         return 0.0
     assert a.take is not None
@@ -349,7 +350,7 @@ def test_limits_column_is_use_like_every_other_percentage(robot: Robot) -> None:
 
     low, high = result(0.4), result(0.9)
     assert low.key() > high.key()  # less of the range used ranks higher
-    text = table(PlaceReport("shot.usda", 0.0, [low, high], 2, 10, 1.0, SetFile(), {}))
+    text = table(PlaceReport("shot.usda", 0.0, 0.18, [low, high], 2, 10, 1.0, SetFile(), {}))
     lines = text.splitlines()
     header, rows = lines[1], [ln for ln in lines if ln.lstrip().startswith(("1 ", "2 "))]
     assert "limits use" in header and "100% touching a limit" in text
@@ -477,3 +478,32 @@ def test_place_times_still_ends_as_convert_does(tmp_path: Path) -> None:
     # what sets it, as convert says it (place had its own reading of the peak use alone)
     assert best["binding"] == still.take.report.set_by != ""
     assert still.take.report.max_speed < free.take.report.max_speed
+
+
+def test_place_finds_a_flight_case_on_the_floor_across_the_rail(robot: Robot) -> None:
+    """Place stands the rail on the floor, the base on it: a 50 cm case standing on the floor
+    across the rail's far end is a collision with the rail (trial 21: with the base on the
+    floor the rail was sunk under it, the case read 10 cm clear and place laid the track
+    through it)."""
+    from camtraj.collision import Obstacle
+    from camtraj.place import Problem, evaluate
+    from camtraj.set_file import yaw_pose
+    from camtraj.usd_shot import read_shot
+
+    shot = read_shot(Path(__file__).parent.parent / "samples" / "shots" / "maya_dolly_push_in.usda")
+    x, y, yaw = -4.325, 4.505, -43.12  # the README's best placement of the push-in
+    rail = next(s for s in robot_solids(robot) if s.name == "rail")
+    far_end = np.array([rail.xyz[0] + rail.size[0] / 2 - 0.5, 0.0, 0.0, 1.0])
+    at = yaw_pose(x, y, 0.0, yaw) @ far_end  # on the floor (height 0) under the rail's end
+    pose = np.eye(4)
+    pose[:3, 3] = (at[0], at[1], 0.25)
+    case = Obstacle("/case", "box", (0.6, 1.2, 0.5), np.zeros((0, 3)),
+                    np.zeros((0, 3), dtype=np.int64), np.array([1.0]), pose[None], np.zeros(3),
+                    0.72)
+    problem = Problem(robot, np.array(shot.cam2world), np.array(shot.times),
+                      np.array(shot.frames), np.array(shot.time_codes), 0.0, 250.0,
+                      obstacles=(case,))
+    result = evaluate(problem, x, y, yaw, 1)
+    assert result.reachable == 1.0 and not result.collision_free
+    assert "/case" in result.reason and any(part in result.reason for part in ("rail", "carriage"))
+    assert result.margins["obstacle_m"] < -0.05  # 5-18 cm into it, not 10 cm clear

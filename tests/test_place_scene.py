@@ -33,6 +33,7 @@ from tests.shots import base_move, placement, write_shot
 
 TRUE = (-37.0, 52.0, 121.0)  # the middle of the search region (x, y [m], yaw [deg])
 HALF = 0.5  # the search region: TRUE +- HALF metres in the track's axes, yaw TRUE's
+BASE_Z = 0.18  # the base on the rail lying on the floor (height 0): the URDF's rail is 18 cm deep
 SHIFTS = {"left": (0.0, 4.3, 0.0), "right": (0.0, -4.5, 0.0), "ahead": (0.0, 0.0, 0.3),
           "far": (0.0, 16.3, 0.0)}  # camera path offsets in the base frame of TRUE [m]
 FAR_BASE = 12.0  # the far shot's own square is this far left of TRUE's [m]
@@ -102,7 +103,7 @@ def speed(shot: Path, x: float, y: float) -> float:
     """Max feasible speed of the shot with the base at (x, y) through the public pipeline
     (0 where it cannot be done)."""
     try:
-        a = analyse(shot, ConvertOptions(placement=(x, y, 0.0, TRUE[2]), timing="scale"))
+        a = analyse(shot, ConvertOptions(placement=(x, y, BASE_Z, TRUE[2]), timing="scale"))
     except CamtrajError:
         return 0.0
     assert a.take is not None
@@ -408,3 +409,17 @@ def test_the_scene_search_takes_the_same_steps_whatever_the_jobs(
         worst = min(result(i, *found[-1], 1).max_speed for i in range(3))
         assert best.results[best.limiting].max_speed == pytest.approx(worst)
     assert len(set(found)) == 1, found
+
+
+def test_shots_of_one_stage_file_are_told_apart_by_camera_and_frames() -> None:
+    """Trial 21: previs keeps several cameras in one stage file, and the scene's table, its
+    split and its JSON named each shot by the file alone ('a.usda | a.usda, a.usda')."""
+    from camtraj.scene import SceneShot
+
+    dolly = SceneShot("stage.usda", "/World/cams/dolly")
+    crane = SceneShot("stage.usda", "/World/cams/crane", (1001, 1048), "scale")
+    assert dolly.name == "stage.usda /World/cams/dolly"
+    assert crane.name == "stage.usda /World/cams/crane frames 1001-1048"
+    assert SceneShot("stage.usda").name == "stage.usda"
+    assert crane.to_json() == {"path": "stage.usda", "camera": "/World/cams/crane",
+                               "frames": [1001, 1048], "timing": "scale"}
