@@ -361,8 +361,9 @@ class OutputSet:
                         os.replace(out.named, out.target)
                 except (OSError, InputError) as exc:
                     self._restore(done)
-                    reason = _reason(exc) if isinstance(exc, OSError) else str(exc)
-                    msg = f"cannot write {out.what}: {reason}; nothing was replaced"
+                    said = (f"cannot write {out.what}: {_reason(exc)}" if isinstance(exc, OSError)
+                            else str(exc))  # _link's own error names the output already
+                    msg = f"{said}; nothing was replaced"
                     raise InputError(msg) from None
                 out.named = None
                 done.append((out, backup))

@@ -322,3 +322,23 @@ def test_sigkill_inside_the_commit(tmp_path: Path, existing: tuple[str, ...]) ->
         assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []
         at += 1
     assert at > 3
+
+
+def test_a_folder_made_read_only_before_the_commit_is_said_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Trial 21: the folder made read-only during a run read "cannot write -o p.toml: cannot
+    write -o p.toml: permission denied"; the output is named once."""
+    def refused(*_args: object, **_kwargs: object) -> None:
+        raise PermissionError(13, "Permission denied")
+
+    target = tmp_path / "p.toml"
+    with OutputSet() as out:
+        out.add(target, "-o")
+        out.write_bytes(target, b"x = 1\n")
+        monkeypatch.setattr(outputs_mod.os, "link", refused)  # an unnamed temporary file
+        monkeypatch.setattr(outputs_mod.os, "replace", refused)  # a named one (no O_TMPFILE)
+        with pytest.raises(InputError) as err:
+            out.commit()
+    assert str(err.value).count("cannot write") == 1, err.value
+    assert str(err.value).endswith("permission denied; nothing was replaced"), err.value
+    assert not target.exists()
