@@ -41,6 +41,9 @@ class Placement:
     overrides: str | None = None
     """The set file's placement that this one (``--placement``) replaces, as
     :func:`placement_text` shows it; None when nothing was replaced."""
+    notes: tuple[str, ...] = ()
+    """What a person should know of where it stands (warnings of the run): a set file with no
+    placement of its own, a rail over the set file's keep-outs or off its floor region."""
 
     @classmethod
     def from_xyz_yaw(cls, x: float, y: float, z: float, yaw_deg: float,

@@ -38,7 +38,7 @@ from camtraj.errors import (
 )
 from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.ik.path import move_to_start
-from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
+from camtraj.inputs import one_line, require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
@@ -139,6 +139,42 @@ def load_placement(options: ConvertOptions) -> Placement:
             return given
         return replace(given, overrides=placement_text(from_file.describe()))
     return from_file or Placement()
+
+
+def placement_notes(options: ConvertOptions, placement: Placement, robot: Robot,
+                    shot: Shot) -> tuple[str, ...]:
+    """Warnings about where the robot stands, against the set file: it has no placement of
+    its own (the robot at the stage origin, where a wrong file given by mistake puts it), or
+    the rail at the placement leaves its floor region or crosses a keep-out (checked as
+    ``place`` checks its candidates: the rail's footprint)."""
+    if options.set_file is None:
+        return ()
+    sf = SetFile.read(options.set_file)
+    where = one_line(options.set_file)
+    if sf.base2world is None and options.placement is None:
+        return (f"the set file {where} has no [placement]: the robot base stands at the "
+                "stage origin (camtraj place -o writes a set file with one)",)
+    if sf.region is None and not sf.keep_out:
+        return ()
+    from camtraj.reach import floor_ok
+    from camtraj.set_file import floor_polygon
+
+    def polygon(points: Array, key: str) -> Array:
+        return floor_polygon(points, shot.meters_per_unit, shot.up_axis, where, key)
+
+    R, (x, y, _z) = placement.base2world[:3, :3], placement.base2world[:3, 3]
+    at = (np.array([x]), np.array([y]), np.array([math.degrees(math.atan2(R[1, 0], R[0, 0]))]))
+    notes = []
+    if sf.region is not None and not floor_ok(robot, *at, polygon(sf.region, "floor.region"),
+                                              [])[0]:
+        notes.append(f"the rail at this placement is not wholly inside the floor region of "
+                     f"{where}")
+    crossed = [i for i, k in enumerate(sf.keep_out)
+               if not floor_ok(robot, *at, None, [polygon(k, f"floor.keep_out[{i}]")])[0]]
+    if crossed:
+        which = ", ".join(f"keep_out[{i}]" for i in crossed)
+        notes.append(f"the rail at this placement crosses {which} of {where}")
+    return tuple(notes)
 
 
 CUT_RATIO = 8.0
@@ -270,6 +306,7 @@ def analyse(
                  else robot.joint_vector(options.start_from, "--start-from"))
         placement = load_placement(options)
         shot = load_shot(shot_path, options)
+        placement = replace(placement, notes=placement_notes(options, placement, robot, shot))
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
@@ -544,6 +581,7 @@ def _run_warnings(analysis: Analysis) -> list[str]:
     warnings = [*shot.warnings, *take.report.warnings]
     # a bad key or a cut that a slowed-down take (scale, optimal) still runs through
     warnings += camera_cuts(analysis.targets, shot.frames)
+    warnings += analysis.placement.notes
     if analysis.placement.overrides is not None:
         warnings.append(f"--placement replaces the set file's placement "
                         f"{analysis.placement.overrides}: the take is for the robot where "

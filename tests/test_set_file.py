@@ -115,3 +115,38 @@ def test_floor_points_convert_like_the_camera() -> None:
     expected = (YUP2ZUP @ p[0]) * 0.01
     assert np.allclose(floor_xy(p, 0.01, "Y")[0], expected[:2])
     assert np.allclose(floor_xy(p, 1.0, "Z")[0], p[0, :2])
+
+
+def test_a_set_file_with_no_placement_or_a_rail_off_its_floor_is_warned_of(
+        tmp_path: Path) -> None:
+    """Trial 21: a set file without [placement] put the robot at the stage origin in silence
+    (a wrong file given by mistake gives a take for the wrong track position), and a
+    placement whose rail crossed the file's keep-out or left its floor region was taken as
+    it was. The push-in is a Y-up cm stage: floor points are [x, 0, z] in cm."""
+    from camtraj.analysis import Placement
+    from camtraj.convert import placement_notes
+    from camtraj.robot import Robot
+    from camtraj.usd_shot import read_shot
+
+    robot = Robot.default()
+    shot = read_shot(Path(__file__).parent.parent / "samples" / "shots" / "maya_dolly_push_in.usda")
+    bare = tmp_path / "bare.toml"
+    bare.write_text("[floor]\nheight = 0.0\n", encoding="utf-8")
+    (note,) = placement_notes(ConvertOptions(set_file=str(bare)), Placement(), robot, shot)
+    assert "bare.toml has no [placement]" in note and "stage origin" in note
+    # given on the command line instead: nothing to say
+    options = ConvertOptions(set_file=str(bare), placement=(0.0, 0.0, 0.0, 0.0))
+    assert placement_notes(options, Placement(), robot, shot) == ()
+    # the rail at the origin lies along +x from x = r10 + lower track - 0.6 m (URDF's rail)
+    square = "[[-100, 0, -100], [100, 0, -100], [100, 0, 100], [-100, 0, 100]]"
+    far = "[[5000, 0, 5000], [6000, 0, 5000], [6000, 0, 6000]]"
+    placed = tmp_path / "placed.toml"
+    placed.write_text(f"[placement]\nx = 0.0\ny = 0.0\nz = 0.18\nyaw_deg = 0.0\n[floor]\n"
+                      f"keep_out = [{far}, {square}]\nregion = {far}\n", encoding="utf-8")
+    notes = placement_notes(ConvertOptions(set_file=str(placed)), Placement(), robot, shot)
+    assert notes == ("the rail at this placement is not wholly inside the floor region of "
+                     f"{placed}", f"the rail at this placement crosses keep_out[1] of {placed}")
+    clear = tmp_path / "clear.toml"  # the keep-out 20 m to the side: nothing to say
+    clear.write_text(f"[placement]\nx = 0.0\ny = 0.0\nz = 0.18\nyaw_deg = 0.0\n[floor]\n"
+                     f"keep_out = [{far}]\n", encoding="utf-8")
+    assert placement_notes(ConvertOptions(set_file=str(clear)), Placement(), robot, shot) == ()
