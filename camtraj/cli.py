@@ -89,13 +89,14 @@ def _options(kw: dict[str, Any]) -> ConvertOptions:
 def stopped(exc: KeyboardInterrupt, command: str | None = None) -> NoReturn:
     """One line and exit 128 + signal (130 for Ctrl-C) for a run stopped by a signal.
 
-    ``convert`` and ``check`` write nothing then; a ``batch`` keeps the shots it finished.
+    Every command writes nothing then (its outputs are committed together at its end); a
+    ``batch`` keeps the shots it finished.
     """
     if isinstance(exc, interrupts.Interrupted):
         name, code = exc.signal_name, exc.exit_code
     else:
         name, code = "SIGINT", 130
-    what = "" if command not in (None, "convert", "check", "info") else "; nothing was written"
+    what = "" if command == "batch" else "; nothing was written"
     with contextlib.suppress(OSError, ValueError):
         click.echo(f"ERROR: stopped by {name}{what}", err=True)
     sys.exit(code)
@@ -393,6 +394,7 @@ def info(mcap_file: str, as_json: bool) -> None:
         f"{f'{rate:.6g}' if isinstance(rate, float) else rate} fps)",
         f"take       {d['duration_s']:.3f} s{grid}, timing {mode}, speed factor {factor}",
         f"robot      {meta.get('robot')}",
+        *_start_and_end(d),
         f"written by {meta.get('tool_version')}",
         "topics:",
     ]
@@ -401,6 +403,20 @@ def info(mcap_file: str, as_json: bool) -> None:
     lines += _limits_used(d)
     lines += _controller_counts(d.get("controller"))
     click.echo("\n".join(lines))
+
+
+def _start_and_end(d: dict[str, Any]) -> list[str]:
+    """``camtraj info``: where the robot stands when the take begins and when it ends, as
+    ``--start-from`` takes them (m and deg): a next take chained on this one starts from
+    its end."""
+    from camtraj.options import start_from_text
+
+    lines = []
+    for label, key in (("starts at ", "start_joints"), ("ends at   ", "end_joints")):
+        q = d.get(key) or {}
+        if all(name in q for name in JOINT_NAMES):
+            lines.append(f"{label} --start-from {start_from_text([q[n] for n in JOINT_NAMES])}")
+    return lines
 
 
 def _controller_counts(controller: dict[str, Any] | None) -> list[str]:

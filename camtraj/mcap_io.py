@@ -1530,7 +1530,9 @@ def describe(path: str | Path) -> dict[str, Any]:
         (list of topic, type, count), ``limits`` (the robot's joint names and limits, or None),
         ``peak_use`` (axis -> quantity -> fraction of the limit the shot used, or None for
         files that do not record it), ``position_range`` (axis -> [min, max] over the shot
-        [m, rad], or None), ``metadata`` (the ``camtraj`` record).
+        [m, rad], or None), ``start_joints`` and ``end_joints`` (the first and the last
+        /joint_states sample: joint name -> position [m, rad], or None), ``metadata`` (the
+        ``camtraj`` record).
 
     Raises:
         InputError: The file cannot be read or is not MCAP.
@@ -1614,8 +1616,19 @@ def _describe(path: Path, stream: IO[bytes]) -> dict[str, Any]:
         "peak_use": _json_or_none(take_md.get("peak_use")),
         "position_range": _json_or_none(take_md.get("position_range")),
         "controller": _json_or_none(take_md.get("controller")),
+        "start_joints": _end_sample(reader, reverse=False),
+        "end_joints": _end_sample(reader, reverse=True),
         "metadata": take_md,
     }
+
+
+def _end_sample(reader: Any, *, reverse: bool) -> dict[str, float] | None:
+    """The take's first (or last) /joint_states sample: joint name -> position [m, rad]
+    (where the robot stands when the take begins, or ends: the next take's start pose)."""
+    for _s, _c, _m, msg in reader.iter_decoded_messages(topics=[TOPIC_JOINT_STATES],
+                                                        reverse=reverse):
+        return {str(n): float(v) for n, v in zip(msg.name, msg.position, strict=True)}
+    return None
 
 
 def _json_or_none(text: str | None) -> Any:

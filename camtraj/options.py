@@ -165,7 +165,7 @@ def _parse_start_from(text: str) -> tuple[float, ...]:
     return tuple(math.radians(v) if REVOLUTE[i] else v for i, v in enumerate(values))
 
 
-def _format_start_from(values: Sequence[float]) -> str:
+def start_from_text(values: Sequence[float]) -> str:
     """``--start-from``'s text for joint values (8,) [m, rad]: metres, and the shortest degrees
     that convert back to the same radians (``--start-from 30`` is echoed as 30.0, not as
     math.degrees' 29.999999999999996)."""
@@ -383,7 +383,7 @@ def option_values(options: ConvertOptions) -> list[tuple[str, str]]:
     pairs.append(("--rate", repr(float(options.rate))))
     pairs.append(("--timing", options.timing))
     if options.start_from is not None:
-        pairs.append(("--start-from", _format_start_from(options.start_from)))
+        pairs.append(("--start-from", start_from_text(options.start_from)))
     if options.objective is not None:
         pairs.append(("--objective", options.objective))
     if options.focal_length_unit != "schema":

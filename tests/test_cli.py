@@ -692,3 +692,31 @@ def test_a_camera_that_stops_hard_is_said_to_swing_around_its_end_frames(
     assert note not in procs["quintic"].stdout
     assert ("the camera moves 0.0 mm before the first frame, 0.0 mm after the last"
             in procs["quintic"].stdout)
+
+
+def test_info_says_where_the_take_ends_as_the_next_take_starts_from_it(tmp_path: Path) -> None:
+    """Trial 21: chaining takes meant decoding /joint_states by hand (radians) to type the
+    next take's --start-from (degrees). info prints both ends as --start-from takes them; the
+    next take, started from the end, begins exactly where this one ends."""
+    crane, push = tmp_path / "crane.mcap", tmp_path / "push.mcap"
+    assert run_cli("convert", SHOTS / "blender_crane_up.usda", "-o", crane).returncode == 0
+    info = run_cli("info", crane)
+    assert info.returncode == 0, info.stderr
+    ends = re.findall(r"^(starts at|ends at) +--start-from (\S+)$", info.stdout, re.MULTILINE)
+    assert [label for label, _ in ends] == ["starts at", "ends at"], info.stdout
+    last = read_take(crane).q[-1, :8]
+    given = start_from_values(ends[1][1])  # degrees for radians: to an ulp or two
+    assert np.allclose(given, last, rtol=0.0, atol=1e-14), given - last
+    proc = run_cli("convert", MAYA, "-o", push, "--start-from", ends[1][1])
+    assert proc.returncode == 0, proc.stderr
+    assert np.array_equal(read_take(push).q[0, :8], given)
+    data = json.loads(run_cli("info", crane, "--json").stdout)
+    assert [data["end_joints"][n] for n in JOINT_NAMES] == last.tolist()
+
+
+def start_from_values(text: str) -> np.ndarray:
+    """--start-from's text (m for track/extend, deg for the rest) -> [m, rad], by hand."""
+    from camtraj.robot import REVOLUTE
+
+    return np.array([math.radians(float(v)) if REVOLUTE[i] else float(v)
+                     for i, v in enumerate(text.split(","))])
