@@ -34,13 +34,12 @@ import contextlib
 import json
 import logging
 import math
-import multiprocessing
 import os
 import signal
 import sys
 import time
 import unicodedata
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -66,6 +65,7 @@ from camtraj.outputs import (
     remove_stale_temps,
 )
 from camtraj.shown import frame_span, speed_percent
+from camtraj.workers import default_jobs, mp_context, start_workers_early, worker_environment
 
 __all__ = [
     "REPORT_NAME",
@@ -75,7 +75,6 @@ __all__ = [
     "batch_command",
     "output_names",
     "run_batch",
-    "start_workers_early",
     "write_json_atomic",
     "write_text_atomic",
 ]
@@ -475,51 +474,6 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, stop: Any, signum: int) -> None:
     pool.shutdown(wait=True, cancel_futures=True)  # the stopped shots end quickly
 
 
-_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-               "PYTHONSAFEPATH": "1"}
-"""Worker environment: one BLAS thread per worker, as the workers already use every core;
-and no current folder on the fork server's import path (it starts as ``python -c``, which
-puts it first: a folder named ``camtraj`` there, a clone of this repository say, was
-imported instead of the installed package and every worker failed)."""
-
-
-@contextlib.contextmanager
-def _worker_environment() -> Iterator[None]:
-    """Set :data:`_WORKER_ENV` (where the user has not) while worker processes are started."""
-    added = [k for k in _WORKER_ENV if k not in os.environ]
-    os.environ.update({k: _WORKER_ENV[k] for k in added})
-    try:
-        yield
-    finally:
-        for k in added:
-            os.environ.pop(k, None)
-
-
-def _mp_context() -> multiprocessing.context.BaseContext:
-    # forkserver: workers fork from a clean, pre-imported server (fast and thread-safe);
-    # spawn where there is no forkserver (Windows).
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["camtraj.convert"])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def start_workers_early() -> None:
-    """Start the worker fork server now, so that it imports the pipeline while this process does.
-
-    Optional: :func:`run_batch` starts it anyway. Calling this before the first import of
-    :mod:`camtraj.convert` overlaps the two imports (about a second each) on two cores.
-    """
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return
-    from multiprocessing import forkserver
-
-    _mp_context()
-    with _worker_environment():
-        forkserver.ensure_running()
-
-
 def _unreadable(shot: str) -> str | None:
     """Why a shot cannot be read at all (missing, a FIFO, a folder), else None."""
     try:
@@ -598,12 +552,7 @@ def run_batch(
         raise InputError(msg)
     out = Path(outdir)
     names = output_names(shots, out)
-    if jobs is None:
-        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-        jobs = jobs or 1
-    if jobs < 1:
-        msg = f"jobs must be at least 1, got {jobs}"
-        raise InputError(msg)
+    jobs = default_jobs(jobs)
 
     # The workers' outputs are checked here, all together, before any shot runs: no output
     # is an input of the batch (a shot, a layer it uses, the robot or set file), no two
@@ -680,7 +629,7 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
     if todo:
         from tqdm import tqdm
 
-        context = _mp_context()
+        context = mp_context()
         stop = context.Event()
         with (
             cf.ProcessPoolExecutor(
@@ -696,7 +645,7 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
                 dynamic_ncols=True,
             ) as bar,
         ):
-            with _worker_environment():  # workers (and the forkserver) start on submit
+            with worker_environment():  # workers (and the forkserver) start on submit
                 futures = {
                     pool.submit(
                         _convert_one,

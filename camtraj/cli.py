@@ -32,6 +32,7 @@ from camtraj.errors import (
     UnreachableFramesError,
     failure_lines,
     one_line,
+    os_reason,
 )
 from camtraj.options import (
     ConvertOptions,
@@ -111,7 +112,7 @@ class _Main(click.Group):
     """
 
     LAZY: ClassVar[dict[str, tuple[str, str]]] = {
-        "place": ("camtraj.place", "place_command"),
+        "place": ("camtraj.place_command", "place_command"),
         "batch": ("camtraj.batch", "batch_command"),
         "farm": ("camtraj.farm", "farm_group"),
     }
@@ -222,9 +223,9 @@ def _pass_on_warnings(caught: list[warnings.WarningMessage], code: Any) -> None:
 def _file_failed(exc: OSError) -> NoReturn:
     """One line and exit 1 for a file a command did not expect to fail (a file of camtraj's
     own installation gone, say): the file and the reason, not a traceback."""
-    reason, name = exc.strerror or str(exc), exc.filename
+    name = exc.filename
     name = os.fsdecode(name) if isinstance(name, (str, bytes, os.PathLike)) else str(name)
-    _fail(CamtrajError(f"cannot use {name}: {reason[:1].lower()}{reason[1:]}"))  # exit 1
+    _fail(CamtrajError(f"cannot use {name}: {os_reason(exc)}"))  # exit 1
 
 
 def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
@@ -234,9 +235,7 @@ def _stdout_failed(exc: OSError, code: Any = 0) -> NoReturn:
     if exc.errno == errno.EPIPE:  # `camtraj check ... | head`: the reader has what it wanted
         sys.exit(code if isinstance(code, int) and code != 0 else 128 + signal.SIGPIPE)
     with contextlib.suppress(OSError, ValueError):
-        reason = exc.strerror or str(exc)
-        click.echo(f"ERROR: cannot write to standard output: {reason[:1].lower()}{reason[1:]}",
-                   err=True)
+        click.echo(f"ERROR: cannot write to standard output: {os_reason(exc)}", err=True)
     sys.exit(code if isinstance(code, int) and code != 0 else EXIT_INPUT)
 
 

@@ -6,6 +6,7 @@ Exit codes (design.md §5): 2 for bad input or usage, 3 when the shot cannot be 
 from __future__ import annotations
 
 import os
+import stat
 
 from camtraj.shown import frame_runs
 
@@ -17,6 +18,26 @@ def one_line(text: str | os.PathLike[str]) -> str:
     if text.isprintable():
         return text
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def os_reason(exc: OSError) -> str:
+    """An operating-system error as the end of a message: 'permission denied'."""
+    text = exc.strerror or str(exc)
+    return text[:1].lower() + text[1:]
+
+
+_KINDS = {
+    stat.S_IFDIR: "a folder",
+    stat.S_IFCHR: "a character device",
+    stat.S_IFBLK: "a block device",
+    stat.S_IFIFO: "a named pipe (FIFO)",
+    stat.S_IFSOCK: "a socket",
+}
+
+
+def file_kind(mode: int) -> str:
+    """What a path that is not a regular file is, by its ``st_mode``: 'a named pipe (FIFO)'."""
+    return _KINDS.get(stat.S_IFMT(mode), "not a regular file")
 
 
 class CamtrajError(Exception):

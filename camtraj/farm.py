@@ -62,15 +62,13 @@ import click
 
 from camtraj import __version__, jsonsafe
 from camtraj.batch import output_names
+from camtraj.choices import FOCAL_LENGTH_UNITS, OBJECTIVES, TIMING_MODES
 from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
 from camtraj.folders import check_can_make
 from camtraj.inputs import files_read, one_line, read_text, require_regular_file
 from camtraj.options import (
     EDGE_OPTIONS,
-    FOCAL_LENGTH_UNITS,
-    OBJECTIVES,
     RATE_RANGE,
-    TIMING_MODES,
     ConvertOptions,
     build_options,
     convert_options,

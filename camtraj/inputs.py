@@ -17,11 +17,20 @@ import stat
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from camtraj import interrupts
-from camtraj.errors import InputError, LensFileError, RobotFileError, ShotFileError, one_line
-from camtraj.options import ConvertOptions
+from camtraj.errors import (
+    InputError,
+    LensFileError,
+    RobotFileError,
+    ShotFileError,
+    file_kind,
+    one_line,
+)
+
+if TYPE_CHECKING:  # a type only (options imports robot, which reads its file here)
+    from camtraj.options import ConvertOptions
 
 __all__ = [
     "files_read",
@@ -32,14 +41,6 @@ __all__ = [
     "run_inputs",
     "shot_layers",
 ]
-
-_KIND = {
-    stat.S_IFDIR: "a folder",
-    stat.S_IFCHR: "a character device",
-    stat.S_IFBLK: "a block device",
-    stat.S_IFIFO: "a named pipe (FIFO)",
-    stat.S_IFSOCK: "a socket",
-}
 
 MAX_TEXT_BYTES = 64 * 1024 * 1024
 """Largest robot, set or manifest file read [bytes]; more is not a hand-written file."""
@@ -55,7 +56,7 @@ def require_regular_file(path: str | os.PathLike[str], what: str, error: type[In
     except (OSError, ValueError):
         return
     if not stat.S_ISREG(mode):
-        kind = _KIND.get(stat.S_IFMT(mode), "not a regular file")
+        kind = file_kind(mode)
         msg = f"{one_line(path)}: the {what} is {kind}, not a regular file"
         raise error(msg)
 
@@ -102,7 +103,7 @@ def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) 
     try:  # O_NONBLOCK: opening a FIFO does not wait for a writer
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            kind = _KIND.get(stat.S_IFMT(st.st_mode), "not a regular file")
+            kind = file_kind(st.st_mode)
             msg = f"{where}: cannot read it: it is {kind}, not a regular file"
             raise error(msg)
         if st.st_size > MAX_TEXT_BYTES:

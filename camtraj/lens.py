@@ -35,9 +35,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from camtraj.controller import CONTROLLER_KEYS, ControllerUnits, controller_units
 from camtraj.errors import InputError, LensFileError, LensRangeError, frame_ranges
 from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
-from camtraj.robot import CONTROLLER_KEYS, ControllerUnits, controller_units
 
 if TYPE_CHECKING:
     from camtraj.timing import Limits

@@ -45,7 +45,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import ArrayLike, NDArray
 
-from camtraj.errors import CamtrajError, InputError
+from camtraj.errors import CamtrajError, InputError, os_reason
 from camtraj.robot import Robot
 from camtraj.ros2 import (
     IMAGE_WIDTH,
@@ -777,11 +777,6 @@ def _robot_metadata(robot: Robot) -> dict[str, str]:
     return {key: json.dumps(value) for key, value in desc.items()}
 
 
-def _reason(exc: OSError) -> str:
-    text = exc.strerror or str(exc)
-    return text[:1].lower() + text[1:]
-
-
 def write_take(
     path: str | Path, take: TakeData, robot: Robot, metadata: Mapping[str, str]
 ) -> None:
@@ -1051,7 +1046,7 @@ def _open_for_reading(path: Path) -> IO[bytes]:
         head = stream.read(len(_MCAP_MAGIC))
         stream.seek(0)
     except OSError as exc:
-        msg = f"cannot read {path}: {_reason(exc)}"
+        msg = f"cannot read {path}: {os_reason(exc)}"
         raise InputError(msg) from exc
     if head != _MCAP_MAGIC:
         start = stream.read(1 << 16) if head.startswith(b"#usda") else b""
@@ -1080,7 +1075,7 @@ def _guard(path: Path, action: Callable[[], Any]) -> Any:
     except CamtrajError:
         raise
     except OSError as exc:
-        msg = f"cannot read {path}: {_reason(exc)}"
+        msg = f"cannot read {path}: {os_reason(exc)}"
         raise InputError(msg) from exc
     except CRCValidationError as exc:
         msg = (f"{path}: the file is damaged: a checksum (CRC) does not match its data "

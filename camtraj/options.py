@@ -16,14 +16,12 @@ from typing import Any, TypeVar
 
 import click
 
+from camtraj.choices import FOCAL_LENGTH_UNITS, OBJECTIVES, TIMING_MODES
 from camtraj.errors import InputError
 
-TIMING_MODES = ("shot", "scale", "optimal")
 EDGE_OPTIONS = ("gentle", "fast", "still")
 """--edges: the timing stage's run-up and run-out modes, and still (gentle ends where the
 camera does not rest; the robot still on an end frame where it does)."""
-OBJECTIVES = ("shot", "paper")
-FOCAL_LENGTH_UNITS = ("schema", "mm")
 F = TypeVar("F", bound=Callable[..., Any])
 RATE_RANGE = (10.0, 10000.0)
 """The servo rates a take may be sampled at [Hz]."""

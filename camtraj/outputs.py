@@ -59,7 +59,7 @@ from types import TracebackType
 from typing import BinaryIO
 
 from camtraj import interrupts
-from camtraj.errors import InputError
+from camtraj.errors import InputError, file_kind, os_reason
 from camtraj.folders import check_can_make, make_parent, remove_empty
 from camtraj.inputs import one_line
 
@@ -127,22 +127,6 @@ def remove_stale_temps(folder: str | os.PathLike[str], name: str | None = None) 
             os.unlink(entry.path)
             removed.append(Path(entry.path))
     return removed
-
-
-def _kind(mode: int) -> str:
-    kinds = (
-        (stat.S_ISDIR, "a folder"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISFIFO, "a named pipe (FIFO)"),
-        (stat.S_ISSOCK, "a socket"),
-    )
-    return next((text for test, text in kinds if test(mode)), "not a regular file")
-
-
-def _reason(exc: OSError) -> str:
-    text = exc.strerror or str(exc)
-    return text[:1].lower() + text[1:]
 
 
 def _same_file(a: os.stat_result, b: os.stat_result) -> bool:
@@ -247,7 +231,7 @@ class OutputSet:
         try:
             st = os.stat(folder)
         except OSError as exc:
-            what = "does not exist" if exc.errno == errno.ENOENT else _reason(exc)
+            what = "does not exist" if exc.errno == errno.ENOENT else os_reason(exc)
             msg = f"cannot write {out.what}: folder {folder} {what}"
             raise InputError(msg) from None
         if not stat.S_ISDIR(st.st_mode):
@@ -258,11 +242,11 @@ class OutputSet:
         except FileNotFoundError:
             return
         except OSError as exc:
-            msg = f"cannot write {out.what}: {_reason(exc)}"
+            msg = f"cannot write {out.what}: {os_reason(exc)}"
             raise InputError(msg) from None
         if not stat.S_ISREG(st.st_mode):
             msg = (
-                f"cannot write {out.what}: it is {_kind(st.st_mode)}, not a regular file; "
+                f"cannot write {out.what}: it is {file_kind(st.st_mode)}, not a regular file; "
                 "camtraj only replaces regular files"
             )
             raise InputError(msg)
@@ -280,7 +264,7 @@ class OutputSet:
             except OSError as exc:
                 if exc.errno not in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
                     msg = (f"cannot write {out.what}: cannot create files in {folder}: "
-                           f"{_reason(exc)}")
+                           f"{os_reason(exc)}")
                     raise InputError(msg) from None
         named = folder / temp_name(out.target.name)
         with interrupts.deferred():
@@ -289,7 +273,7 @@ class OutputSet:
             try:
                 out.fd = os.open(named, flags | os.O_CREAT | os.O_EXCL, _NEW_FILE_MODE)
             except OSError as exc:
-                msg = f"cannot write {out.what}: cannot create files in {folder}: {_reason(exc)}"
+                msg = f"cannot write {out.what}: cannot create files in {folder}: {os_reason(exc)}"
                 raise InputError(msg) from None
             out.named = named
 
@@ -306,7 +290,7 @@ class OutputSet:
             with stream:
                 yield stream
         except OSError as exc:
-            msg = f"cannot write {out.what}: {_reason(exc)}"
+            msg = f"cannot write {out.what}: {os_reason(exc)}"
             raise InputError(msg) from exc
 
     def write_bytes(self, path: str | os.PathLike[str], data: bytes) -> None:
@@ -336,7 +320,7 @@ class OutputSet:
             try:
                 os.fsync(out.fd)
             except OSError as exc:
-                msg = f"cannot write {out.what}: {_reason(exc)}"
+                msg = f"cannot write {out.what}: {os_reason(exc)}"
                 raise InputError(msg) from None
             self._check_destination(out)  # still a regular file or nothing
         # An unnamed file whose destination does not exist yet is linked there directly: it
@@ -361,7 +345,7 @@ class OutputSet:
                         os.replace(out.named, out.target)
                 except (OSError, InputError) as exc:
                     self._restore(done)
-                    said = (f"cannot write {out.what}: {_reason(exc)}" if isinstance(exc, OSError)
+                    said = (f"cannot write {out.what}: {os_reason(exc)}" if isinstance(exc, OSError)
                             else str(exc))  # _link's own error names the output already
                     msg = f"{said}; nothing was replaced"
                     raise InputError(msg) from None
@@ -394,7 +378,7 @@ class OutputSet:
             msg = f"cannot write {out.what}: another program created it during the run"
             raise InputError(msg) from None
         except OSError as exc:
-            msg = f"cannot write {out.what}: {_reason(exc)}"
+            msg = f"cannot write {out.what}: {os_reason(exc)}"
             raise InputError(msg) from None
         if named != out.target:
             out.named = named
@@ -413,7 +397,7 @@ class OutputSet:
             try:  # a file system without hard links
                 shutil.copy2(out.target, backup)
             except OSError as exc:
-                msg = f"cannot write {out.what}: cannot keep its earlier content: {_reason(exc)}"
+                msg = f"cannot write {out.what}: cannot keep its earlier content: {os_reason(exc)}"
                 raise InputError(msg) from None
         return backup
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from camtraj.choices import TIMING_MODES
 from camtraj.errors import InfeasibleError, InputError, PlacementError
 from camtraj.inputs import (
     one_line,
@@ -38,7 +39,7 @@ from camtraj.inputs import (
     reject_unknown_keys,
     require_regular_files,
 )
-from camtraj.options import TIMING_MODES, ConvertOptions
+from camtraj.options import ConvertOptions
 from camtraj.place import (
     LIMITS_USE,
     Layout,
@@ -47,7 +48,6 @@ from camtraj.place import (
     _race,
     _Runner,
     columns,
-    default_jobs,
     load_problem,
     screen,
     search,
@@ -55,6 +55,7 @@ from camtraj.place import (
 )
 from camtraj.set_file import SetFile
 from camtraj.shown import frame_span, speed_percent
+from camtraj.workers import default_jobs
 
 _SCENE_KEYS = {"name", "set_file", "shot"}
 _SHOT_KEYS = {"path", "camera", "frames", "timing"}

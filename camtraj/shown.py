@@ -14,10 +14,12 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
-__all__ = ["EDGE_QUANTITIES", "MAX_SHOWN_SPEED", "SHOWN_RUNS", "SHOWN_TURN_DEG", "camera_moves",
-           "distance", "edge_use", "frame_rate", "frame_runs", "frame_span", "listed", "percent",
-           "scale_fit", "seconds", "servo", "speed_percent", "speed_text"]
+__all__ = ["EDGE_QUANTITIES", "MAX_SHOWN_SPEED", "SHOWN_RUNS", "SHOWN_TURN_DEG", "TIMES",
+           "camera_moves", "distance", "edge_use", "frame_rate", "frame_runs", "frame_span",
+           "listed", "percent", "scale_fit", "seconds", "servo", "speed_percent", "speed_text"]
 
+TIMES = "\u00d7"
+"""The multiplication sign (U+00D7): '1.3x its limit' in the report, with it for the x."""
 #: What the "ends" columns show of the run-up and the run-out.
 EDGE_QUANTITIES = ("acceleration", "jerk")
 

@@ -55,6 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdRender
 
+from camtraj.choices import FOCAL_LENGTH_UNITS
 from camtraj.errors import ShotFileError, frame_ranges
 from camtraj.shown import frame_span
 
@@ -74,12 +75,11 @@ def stage_to_world(meters_per_unit: float, up_axis: str) -> NDArray[np.float64]:
     turn = YUP2ZUP if up_axis == "Y" else np.eye(3)
     return np.asarray(turn * meters_per_unit)
 
+
 _CRATE_MAGIC = b"PXR-USDC"
 _TEXT_MAGIC = b"#usda"
 _ZIP_MAGIC = b"PK\x03\x04"
 _SUPPORTED_UP_AXES = ("Y", "Z")
-FOCAL_LENGTH_UNITS = ("schema", "mm")
-"""``focalLength`` as the UsdGeom.Camera schema says (tenths of a scene unit), or millimetres."""
 MAX_FRAMES = 100_000
 """The most film frames one shot may have (69 minutes at 24 fps)."""
 # Focal lengths of real cine and photo lenses [mm]: fisheyes to the longest telephotos.

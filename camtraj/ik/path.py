@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from camtraj.choices import OBJECTIVES
 from camtraj.errors import UnreachableError, UnreachableFramesError
 from camtraj.ik.closed_form import EXTEND, TRACK
 from camtraj.ik.margins import PathMargins, path_margins
@@ -69,8 +70,6 @@ SAME_SPEED = 1e-3
 #: got another solution 1.7% faster whose run-up drove the track 6.15 m and the pan 149 deg
 #: for 4.86 s next to the set (a new user's trial).
 NEAR_START = 0.05
-
-OBJECTIVES = ("shot", "paper")
 
 
 @dataclass(frozen=True)

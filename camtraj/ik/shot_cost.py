@@ -45,13 +45,13 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.ik.closed_form import TWO_PI
 from camtraj.ik.spline_ops import BandOps, spline_ops
 from camtraj.robot import PRISMATIC, REVOLUTE, Robot
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-TWO_PI = 2.0 * math.pi
 N_MEASURES = 10  # the 8 joints, the wrist singularity distance, the full-stretch distance
 #: Intrusion into a margin zone past which the refinement's cost turns steep (the last fifth
 #: of the zone: 5 deg before a revolute limit by default), so the spline through the frames

@@ -21,7 +21,8 @@ from camtraj.report.data import (
     report_from_mcap,
 )
 from camtraj.report.page import render_html, report_mcap, write_report
-from camtraj.report.samples import QUANTITIES, Samples, reduce_samples
+from camtraj.report.samples import Samples, reduce_samples
+from camtraj.timing.limits import QUANTITIES
 
 __all__ = [
     "QUANTITIES",

@@ -33,8 +33,9 @@ from camtraj.errors import (
     LensRangeError,
     UnreachableFramesError,
 )
-from camtraj.report.samples import QUANTITIES, Samples, in_blocks, reduce_samples
-from camtraj.shown import frame_runs, listed
+from camtraj.report.samples import Samples, in_blocks, reduce_samples
+from camtraj.shown import TIMES, frame_runs, listed
+from camtraj.timing.limits import LIMIT_RTOL, QUANTITIES
 
 if TYPE_CHECKING:
     from camtraj.analysis import Analysis
@@ -44,14 +45,12 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-#: Above 1 + this fraction of a limit a sample counts as over it (float round-off only).
-LIMIT_RTOL = 1e-9
-#: The same for a take read back from MCAP: its jerk is by differences of the recorded
-#: accelerations, which sit on the jerk limit to ~1e-8 in the run-up and run-out.
+#: Above 1 + LIMIT_RTOL of a limit a sample counts as over it; above 1 + this for a take read
+#: back from MCAP: its jerk is by differences of the recorded accelerations, which sit on the
+#: jerk limit to ~1e-8 in the run-up and run-out.
 MCAP_RTOL = 1e-6
 #: Robot poses drawn as stick figures in the path views.
 N_POSES = 5
-TIMES = "\u00d7"  # the multiplication sign
 
 
 @dataclass(frozen=True)

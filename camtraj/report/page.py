@@ -14,7 +14,6 @@ import camtraj
 from camtraj.errors import frame_ranges
 from camtraj.report.data import ReportData
 from camtraj.report.plots import COLORS, figures, limit_text
-from camtraj.report.samples import QUANTITIES
 from camtraj.shown import (
     EDGE_QUANTITIES,
     camera_moves,
@@ -25,6 +24,7 @@ from camtraj.shown import (
     servo,
     speed_text,
 )
+from camtraj.timing.limits import QUANTITIES
 
 # ---------------------------------------------------------------------------------------------
 # The page

@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.report.samples import QUANTITIES
-from camtraj.shown import frame_span
+from camtraj.shown import TIMES, frame_span
+from camtraj.timing.limits import QUANTITIES
 
 if TYPE_CHECKING:
     from camtraj.report.data import ReportData
@@ -55,7 +55,6 @@ COLORS = {"position": "#404040", "velocity": "#1f5fa8", "acceleration": "#e08a00
 #: The y scale of the axis plots stops here [x limit], so a large violation leaves the rest
 #: readable.
 Y_MAX = 2.5
-TIMES = "\u00d7"  # the multiplication sign
 
 
 def _unit(data: ReportData, axis: int, quantity: str) -> tuple[str, float]:

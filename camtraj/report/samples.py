@@ -22,10 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.timing.limits import QUANTITIES
+
 Array = NDArray[np.float64]
 Block = tuple[Array, Array, Array, Array, Array]  # t, q, qd, qdd, qddd
 
-QUANTITIES: tuple[str, ...] = ("position", "velocity", "acceleration", "jerk")
 #: Pixel columns of a plot; servo samples are reduced to a min/max pair per column.
 ENVELOPE_COLUMNS = 700
 #: Float noise allowed when a sample time is compared with a film frame's time [s].

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from camtraj.choices import TIMING_MODES
 from camtraj.robot import JOINT_NAMES
 from camtraj.shown import frame_runs, listed, scale_fit
 from camtraj.timing.clock import MAX_FRAME_RATE, on_the_clock
@@ -49,7 +50,7 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-MODES: tuple[str, ...] = ("shot", "scale", "optimal")
+MODES: tuple[str, ...] = TIMING_MODES
 #: Film frame times may deviate from a uniform grid by this fraction of the frame interval.
 UNIFORM_RTOL = 1e-6
 #: ``"scale"`` slows a move by at most this factor; a move whose run-up or run-out still has
