@@ -16,11 +16,12 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from camtraj.ik import PathSolution
     from camtraj.robot import Robot
-    from camtraj.timing import Take
+    from camtraj.timing import Limits, Take
     from camtraj.usd_shot import Shot
 
 __all__ = ["DEFAULT_SOURCE", "Analysis", "Placement", "axis_value", "camera_travel",
-           "margins_summary", "placement_text"]
+           "margins_summary", "placement_text", "take_axes",
+           "take_limits"]
 
 Array = NDArray[np.float64]
 
@@ -94,6 +95,25 @@ def axis_value(name: str, value: float) -> float:
 
     revolute = name not in JOINT_NAMES or REVOLUTE[JOINT_NAMES.index(name)]
     return math.degrees(value) if revolute else value
+
+
+def take_limits(robot: Robot) -> Limits:
+    """The limits of a take's axes: the robot's joints, then its lens's motors where it has a
+    lens (convert, place and the report all time a shot so)."""
+    from camtraj.timing import Limits
+
+    limits = Limits.from_robot(robot)
+    return limits if robot.lens is None else limits.joined(robot.lens.limits())
+
+
+def take_axes(robot: Robot, q: Array, lens_q: Array | None) -> tuple[Array, Limits]:
+    """The axes a take times and their limits (:func:`take_limits`): the joint path q (n, 8),
+    then the lens's motor positions ``lens_q`` (n, k) where there are any."""
+    from camtraj.timing import Limits
+
+    if robot.lens is None or lens_q is None:
+        return q, Limits.from_robot(robot)
+    return np.hstack([q, lens_q]), take_limits(robot)
 
 
 def margins_summary(analysis: Analysis) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from camtraj.analysis import (
     camera_travel,
     margins_summary,
     placement_text,
+    take_axes,
 )
 from camtraj.errors import (
     InfeasibleError,
@@ -46,7 +47,7 @@ from camtraj.progress import Progress, Silent
 from camtraj.robot import JOINT_NAMES, REVOLUTE, WRIST_FRAME, Robot
 from camtraj.set_file import SetFile
 from camtraj.shown import frame_runs, frame_span
-from camtraj.timing import Limits, LimitViolation, TimingLimitError, time_shot
+from camtraj.timing import LimitViolation, TimingLimitError, time_shot
 from camtraj.timing.path import REST_NAMES, runs
 from camtraj.usd_shot import Shot, read_shot, stage_to_world
 
@@ -339,12 +340,9 @@ def _solve_and_time(analysis: Analysis, shot_path: str | Path, options: ConvertO
         )
     progress.stage("time")
     with _stage(timings, "timing"):
-        q_frames, limits = analysis.path.q, Limits.from_robot(robot)
-        if robot.lens is not None and analysis.lens_q is not None:  # more axes, more limits
-            q_frames = np.hstack([q_frames, analysis.lens_q])
-            limits = limits.joined(robot.lens.limits())
-            if start is not None:  # the lens motors start where the first frame needs them
-                start = np.concatenate([start, analysis.lens_q[0]])
+        q_frames, limits = take_axes(robot, analysis.path.q, analysis.lens_q)
+        if start is not None and analysis.lens_q is not None:
+            start = np.concatenate([start, analysis.lens_q[0]])  # the lens where frame 1 needs it
         try:
             analysis.take = time_shot(
                 q_frames, shot.times, limits, mode=options.timing,

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from camtraj.analysis import take_axes
 from camtraj.errors import (
     CamtrajError,
     InfeasibleError,
@@ -44,7 +45,7 @@ from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.set_file import SetFile, floor_polygon, yaw_pose
 from camtraj.shown import MAX_SHOWN_SPEED, speed_percent
-from camtraj.timing import Limits, TimingLimitError, time_shot
+from camtraj.timing import TimingLimitError, time_shot
 
 if TYPE_CHECKING:
     from camtraj.options import ConvertOptions
@@ -212,10 +213,8 @@ def evaluate(problem: Problem, x: float, y: float, yaw_deg: float, stride: int) 
     except CamtrajError as exc:
         return Result(x, y, yaw_deg, full, 0.0, False, False, 0.0, "", {}, str(exc))
     marg = margins(robot, path.q)
-    q_time, limits = path.q, Limits.from_robot(robot)
-    if robot.lens is not None and problem.lens_q is not None:  # as convert times them
-        q_time = np.hstack([q_time, problem.lens_q[idx]])
-        limits = limits.joined(robot.lens.limits())
+    q_time, limits = take_axes(robot, path.q,
+                               None if problem.lens_q is None else problem.lens_q[idx])
     try:
         take = time_shot(q_time, times, limits, mode="scale",
                          rate=problem.rate if full else min(problem.rate, 100.0),

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from camtraj.analysis import camera_travel, placement_text
+from camtraj.analysis import camera_travel, placement_text, take_axes, take_limits
 from camtraj.errors import (
     InfeasibleError,
     InputError,
@@ -266,12 +266,10 @@ def from_analysis(
         source: The command that ran (shown in the page's footer).
     """
     from camtraj.analysis import margins_summary
-    from camtraj.timing import Limits, TimingLimitError
+    from camtraj.timing import TimingLimitError
 
     shot, robot, take, path = analysis.shot, analysis.robot, analysis.take, analysis.path
-    limits = Limits.from_robot(robot)
-    if robot.lens is not None:  # the lens motors are axes of the take too
-        limits = limits.joined(robot.lens.limits())
+    limits = take_limits(robot)
     n = shot.frames.shape[0]
     common: dict[str, Any] = {
         "shot": str(shot_path), "camera": shot.camera_path,
@@ -397,10 +395,7 @@ def shot_timing_samples(
 
     robot, shot, path = analysis.robot, analysis.shot, analysis.path
     assert path is not None
-    real, q_frames = Limits.from_robot(robot), path.q
-    if robot.lens is not None and analysis.lens_q is not None:
-        real = real.joined(robot.lens.limits())
-        q_frames = np.hstack([q_frames, analysis.lens_q])
+    q_frames, real = take_axes(robot, path.q, analysis.lens_q)
     f = 1.05 / max_speed if math.isfinite(max_speed) and max_speed > 0 else 1.0
     f = max(1.0, f)
     span = real.upper - real.lower
