@@ -12,7 +12,8 @@ optimal), then the largest maximum feasible speed (to 1 %), then the largest mar
    them everywhere (path longer than track plus reach, heights beyond the lift's) is refused
    with the reason before any solve.
 2. The most promising, spread-out survivors are solved on a subsample of the frames and timed.
-3. Local refinement around the best few at half and quarter the grid step.
+3. A pattern search around the best few at half the grid step (polled again while a
+   neighbour wins: :data:`REFINE`), then a quarter and an eighth of it.
 4. The best few are solved and timed on every frame, and collision-checked on the take.
 
 Candidates are evaluated in worker processes; the solver is called through :func:`_solve` only.
@@ -53,9 +54,18 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 
-COARSE_FRAMES = 12  # frames solved per candidate in the coarse stages
+#: Frames solved per candidate in the coarse stages. At 12 a slider's 101 frames were solved
+#: 9 apart, and a placement ranked first there ran 27% slower on every frame than one ranked
+#: below it (the pattern search walked the subsample's errors); at 24 on six shots (samples
+#: and trial 21's) every best placement is as fast or faster (1.00-1.51x) for 1.06x the time.
+COARSE_FRAMES = 24
 COARSE_KEEP = 24  # at most this many survivors of the cheap tests solved on the subsample
-REFINE = ((2, 0.5), (2, 0.25), (1, 0.125))  # (best placements refined, fraction of the step)
+#: The pattern search's levels: (best placements refined, fraction of the grid step, most
+#: polls). The first level polls again where a neighbour won, so the best walks on beyond a
+#: grid step: with one poll per level it moved at most 7/8 of a step from the coarse grid's
+#: best, and place run again from its own answer moved on (trial 21: a dolly 408% -> 466%,
+#: now 452% -> 456%; from the stage origin 300% where 470% was a grid step away).
+REFINE = ((2, 0.5, 4), (2, 0.25, 1), (1, 0.125, 1))
 FULL_KEEP = 3  # placements solved on every frame (at least; --top more)
 SCENE_FULL_KEEP = 2  # a scene's placements raced on every frame (the best solved for all)
 YAW_STEP_DEG = 15.0
@@ -574,7 +584,7 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
     strides = {i: _subsample(problems[i])[0] for i in shots}
     single = len(shots) == 1
     finals = max(FULL_KEEP, top) if single else SCENE_FULL_KEEP
-    needs = [keep for keep, _ in REFINE[1:]] + [finals]  # each race: what the next stage takes
+    needs = [keep for keep, _, _ in REFINE[1:]] + [finals]  # each race: what the next takes
     layouts = [Layout(float(cand[i, 0]), float(cand[i, 1]), float(cand[i, 2]),
                       tuple(shots[j] for j in np.argsort(slack[i], kind="stable")))
                for i in picked]
@@ -596,27 +606,34 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
             layouts.append(now)
         now = next(lay for lay in layouts if _where(lay) == _where(now))
     _race(runner, layouts, strides, REFINE[0][0])
-    # pattern search: +-x, +-y, +-yaw around the best few
-    for (keep, frac), need in zip(REFINE, needs, strict=True):
-        best = _distinct(_ranked(layouts), keep)
+    # pattern search: +-x, +-y, +-yaw around the best few, polled again at the same step while
+    # the best moves (up to the level's polls), then at half the step
+    for (keep, frac, polls), need in zip(REFINE, needs, strict=True):
         h, hy = scr.step * frac, scr.yaw_step * frac
         steps: list[tuple[float, float, float]] = [(h, 0, 0), (-h, 0, 0), (0, h, 0), (0, -h, 0)]
         steps += [(0, 0, hy), (0, 0, -hy)] if hy else []
-        arr = np.array([(r.x + a, r.y + b, r.yaw_deg + c) for r in best for a, b, c in steps])
-        orders = [r.worst_first() for r in best for _ in steps]
-        good = np.all(_slack(problems, shots, env, arr) >= 0, axis=1)
-        good &= floor_ok(robot, arr[:, 0], arr[:, 1], arr[:, 2], scr.region, scr.keep_out)
-        if set_file.yaw_range_deg is not None:
-            good &= (arr[:, 2] >= yaw_lo - 1e-9) & (arr[:, 2] <= yaw_hi + 1e-9)
-        else:
-            arr[:, 2] = (arr[:, 2] + 180.0) % 360.0 - 180.0
-        seen = {_where(r) for r in layouts}
-        for c, o, g in zip(arr, orders, good, strict=True):
-            lay = Layout(float(c[0]), float(c[1]), float(c[2]), o)
-            if g and _where(lay) not in seen:
-                seen.add(_where(lay))
-                layouts.append(lay)
-        _race(runner, layouts, strides, need)
+        for _poll in range(polls):
+            best = _distinct(_ranked(layouts), keep)
+            arr = np.array([(r.x + a, r.y + b, r.yaw_deg + c) for r in best
+                            for a, b, c in steps])
+            orders = [r.worst_first() for r in best for _ in steps]
+            good = np.all(_slack(problems, shots, env, arr) >= 0, axis=1)
+            good &= floor_ok(robot, arr[:, 0], arr[:, 1], arr[:, 2], scr.region, scr.keep_out)
+            if set_file.yaw_range_deg is not None:
+                good &= (arr[:, 2] >= yaw_lo - 1e-9) & (arr[:, 2] <= yaw_hi + 1e-9)
+            else:
+                arr[:, 2] = (arr[:, 2] + 180.0) % 360.0 - 180.0
+            seen = {_where(r) for r in layouts}
+            added = 0
+            for c, o, g in zip(arr, orders, good, strict=True):
+                lay = Layout(float(c[0]), float(c[1]), float(c[2]), o)
+                if g and _where(lay) not in seen:
+                    seen.add(_where(lay))
+                    layouts.append(lay)
+                    added += 1
+            _race(runner, layouts, strides, need)
+            if not added or _ranked(layouts)[0] is best[0]:
+                break  # the best held: the next, finer step
     finalists = _distinct(_ranked(layouts), finals)
     if now is not None and now not in finalists:  # solved in full whatever its subsample said
         finalists.append(now)
