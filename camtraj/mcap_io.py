@@ -777,15 +777,14 @@ def _robot_metadata(robot: Robot) -> dict[str, str]:
     return {key: json.dumps(value) for key, value in desc.items()}
 
 
-def write_take(
-    path: str | Path, take: TakeData, robot: Robot, metadata: Mapping[str, str]
+def write_take_to(
+    stream: IO[bytes], take: TakeData, robot: Robot, metadata: Mapping[str, str]
 ) -> None:
-    """Write a take as a ROS 2 MCAP file, atomically (:class:`camtraj.outputs.OutputSet`).
-
-    On any error nothing is left behind and an existing file at ``path`` stays as it was.
+    """Write a take as a ROS 2 MCAP file into an open binary stream (an output's, of
+    :class:`camtraj.outputs.OutputSet`).
 
     Args:
-        path: Destination ``.mcap`` file.
+        stream: Where the file's bytes go.
         take: The solved, timed take.
         robot: The robot it was solved for (URDF, transforms, limits metadata).
         metadata: The ``camtraj`` metadata record: string keys and values (e.g. source_file,
@@ -793,23 +792,8 @@ def write_take(
             speed_factor, tool_version).
 
     Raises:
-        InputError: The destination cannot be written (missing folder, not a regular file,
-            permission, disk full).
         ValueError: The take does not match the robot (joint names).
     """
-    from camtraj.outputs import OutputSet
-
-    with OutputSet() as outputs:
-        outputs.add(path)
-        with outputs.open(path) as stream:
-            write_take_to(stream, take, robot, metadata)
-        outputs.commit()
-
-
-def write_take_to(
-    stream: IO[bytes], take: TakeData, robot: Robot, metadata: Mapping[str, str]
-) -> None:
-    """Write a take as a ROS 2 MCAP file into an open binary stream (see :func:`write_take`)."""
     lens = () if robot.lens is None else robot.lens.names
     if tuple(take.joint_names) != (*robot.joint_names, *lens) or take.lens_names != lens:
         msg = (

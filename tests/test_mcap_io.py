@@ -32,8 +32,9 @@ from camtraj.mcap_io import (
     read_take,
     seconds_to_ns,
     tf_times,
-    write_take,
+    write_take_to,
 )
+from camtraj.outputs import OutputSet
 from camtraj.robot import JOINT_NAMES, Robot
 from camtraj.urdf import (
     BASE_FRAME,
@@ -62,6 +63,15 @@ METADATA = {
 PLACEMENT = np.array(
     [[0.0, -1.0, 0.0, 2.0], [1.0, 0.0, 0.0, -0.5], [0.0, 0.0, 1.0, 0.1], [0.0, 0.0, 0.0, 1.0]]
 )  # 90 deg of yaw and an offset
+
+
+def write_take(path: Path, take: TakeData, robot: Robot, metadata: dict[str, str]) -> None:
+    """A take written to ``path`` as convert writes it (through an OutputSet)."""
+    with OutputSet() as outputs:
+        outputs.add(path)
+        with outputs.open(path) as stream:
+            write_take_to(stream, take, robot, metadata)
+        outputs.commit()
 
 
 def make_take(

@@ -424,23 +424,22 @@ def test_report_does_not_slow_the_start_of_convert() -> None:
     assert out.stdout.strip() == "False"
 
 
-def test_write_report_replaces_a_file_atomically_and_refuses_its_source(
+def test_the_report_replaces_a_file_atomically_and_refuses_its_source(
     tmp_path: Path, runs: Runs
 ) -> None:
     mcap = runs.folder / "maya.mcap"
-    data = rp.report_from_mcap(mcap)
     (tmp_path / "plain").write_text("a file")
     with pytest.raises(InputError, match="is a file, not a folder"):
-        rp.write_report(tmp_path / "plain" / "r.html", data)
+        rp.report_mcap(mcap, tmp_path / "plain" / "r.html")
     good = tmp_path / "r.html"
-    rp.write_report(good, data)
+    rp.report_mcap(mcap, good)
     first = good.read_bytes()
-    rp.write_report(good, data)
+    rp.report_mcap(mcap, good)
     assert good.read_bytes() == first and leftovers(tmp_path) == []
     copy = tmp_path / "copy.mcap"
     shutil.copyfile(mcap, copy)
     with pytest.raises(InputError, match="it is the MCAP the report is made from"):
-        rp.write_report(copy, data, source=copy)
+        rp.report_mcap(copy, copy)
     assert copy.read_bytes() == mcap.read_bytes()
 
 

@@ -150,3 +150,11 @@ def test_a_set_file_with_no_placement_or_a_rail_off_its_floor_is_warned_of(
     clear.write_text(f"[placement]\nx = 0.0\ny = 0.0\nz = 0.18\nyaw_deg = 0.0\n[floor]\n"
                      f"keep_out = [{far}]\n", encoding="utf-8")
     assert placement_notes(ConvertOptions(set_file=str(clear)), Placement(), robot, shot) == ()
+
+
+def test_a_scene_file_given_as_the_set_file_is_named_as_one(tmp_path: Path) -> None:
+    """Trial 21: it read 'unknown key(s) name, shot', no hint of what the file was."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text('name = "sc12"\n[[shot]]\npath = "a.usda"\n', encoding="utf-8")
+    with pytest.raises(InputError, match=r"a scene file, which `camtraj place --scene` takes"):
+        SetFile.read(scene)

@@ -240,9 +240,22 @@ def test_urdf_joints_names_limits_and_tree() -> None:
         assert mat.get("name") in materials
 
 
-def test_urdf_is_deterministic_text() -> None:
-    assert robot_urdf(Robot.default()) == robot_urdf(Robot.default())
-    assert robot_urdf(Robot.default()).startswith('<?xml version="1.0"?>\n<robot ')
+def test_urdf_is_the_same_text_in_every_process() -> None:
+    """Another interpreter, with other string hashes (set and dict orders), writes the same
+    bytes: a take's /robot_description does not depend on the process that wrote it."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys; from camtraj.robot import Robot; from camtraj.urdf import robot_urdf; "
+            "sys.stdout.write(robot_urdf(Robot.default()))")
+    here = robot_urdf(Robot.default())
+    for seed in ("1", "2"):
+        env = {**os.environ, "PYTHONHASHSEED": seed}
+        there = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                               env=env, check=True, timeout=120).stdout
+        assert there == here
+    assert here.startswith('<?xml version="1.0"?>\n<robot ')
 
 
 # -- roll, pitch, yaw ---------------------------------------------------------------------------

@@ -20,7 +20,7 @@ from camtraj.report.data import (
     pose_indices,
     report_from_mcap,
 )
-from camtraj.report.page import render_html, report_mcap, write_report
+from camtraj.report.page import render_html, report_mcap
 from camtraj.report.samples import Samples, reduce_samples
 from camtraj.timing.limits import QUANTITIES
 
@@ -36,5 +36,4 @@ __all__ = [
     "render_html",
     "report_from_mcap",
     "report_mcap",
-    "write_report",
 ]

@@ -237,28 +237,6 @@ def render_html(data: ReportData) -> str:
     return "\n".join(parts) + "\n"
 
 
-def write_report(path: str | Path, data: ReportData, *, source: str | Path | None = None) -> None:
-    """Render ``data`` and write the HTML page to ``path`` atomically
-    (:class:`camtraj.outputs.OutputSet`: checked first, a temporary file, then a rename).
-
-    Args:
-        path: The HTML file.
-        data: What to show.
-        source: The file the data was read from, which ``path`` may not be.
-
-    Raises:
-        InputError: The file cannot be written, or it is ``source``.
-    """
-    from camtraj.outputs import OutputSet
-
-    with OutputSet() as outputs:
-        outputs.add(path, "-o")
-        if source is not None:
-            outputs.refuse_inputs([(source, "the MCAP the report is made from")])
-        outputs.write_bytes(path, render_html(data).encode("utf-8"))
-        outputs.commit()
-
-
 def report_mcap(mcap: str | Path, path: str | Path) -> None:
     """``camtraj report``: the report of a converted take (``mcap``) written to ``path``.
 
