@@ -157,6 +157,7 @@ def run(log: Callable[[str], None] = print, frames: int = 240, jobs: int = 2) ->
     from camtraj.collision import CollisionModel, read_obstacles, sample_times, take_samples
     from camtraj.convert import analyse
     from camtraj.options import ConvertOptions
+    from camtraj.usd_shot import stage_to_world
 
     out: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="camtraj-bench-place-") as tmp:
@@ -186,7 +187,9 @@ def run(log: Callable[[str], None] = print, frames: int = 240, jobs: int = 2) ->
         _sheet(sheet, cam2world)
         take = analysis.take
         assert take is not None
-        obstacles = read_obstacles(sheet, ("/set/*",), analysis.shot.time_codes)
+        shot = analysis.shot
+        obstacles = read_obstacles(sheet, ("/set/*",), shot.time_codes,
+                                   stage_to_world(shot.meters_per_unit, shot.up_axis))
         model = CollisionModel(analysis.robot, obstacles)
         t0 = time.perf_counter()
         idx = take_samples(analysis.robot, take.q, take.frame_samples)
