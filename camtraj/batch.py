@@ -49,7 +49,13 @@ import click
 from camtraj import __version__, interrupts, jsonsafe
 from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
 from camtraj.folders import check_can_make, make_parent, remove_empty
-from camtraj.inputs import files_read, one_line, read_text, require_regular_file
+from camtraj.inputs import (
+    files_read,
+    one_line,
+    read_text,
+    require_regular_file,
+    require_regular_layers,
+)
 from camtraj.options import (
     ConvertOptions,
     build_options,
@@ -475,9 +481,11 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, stop: Any, signum: int) -> None:
 
 
 def _unreadable(shot: str) -> str | None:
-    """Why a shot cannot be read at all (missing, a FIFO, a folder), else None."""
+    """Why a shot cannot be read at all (missing, a FIFO, a folder, or a layer of it that is
+    one), else None."""
     try:
         require_regular_file(shot, "shot", InputError)
+        require_regular_layers(shot)
     except InputError as exc:
         return str(exc)
     return None if os.path.exists(shot) else "no such file"

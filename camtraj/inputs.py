@@ -38,6 +38,7 @@ __all__ = [
     "read_text",
     "require_regular_file",
     "require_regular_files",
+    "require_regular_layers",
     "run_inputs",
     "shot_layers",
 ]
@@ -146,6 +147,7 @@ def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions)
         msg = f"{name}: the file name is not valid UTF-8 and USD cannot open it; rename the file"
         raise ShotFileError(msg) from None
     require_regular_file(shot, "shot", ShotFileError)
+    require_regular_layers(shot)
     if options.robot is not None:
         require_regular_file(options.robot, "robot file", RobotFileError)
     if options.set_file is not None:
@@ -154,12 +156,64 @@ def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions)
         require_regular_file(options.lens, "lens file", LensFileError)
 
 
+def require_regular_layers(shot: str | os.PathLike[str]) -> None:
+    """Every layer the shot pulls in (sublayers, references and payloads, through the layers
+    they pull in) and every other file its layers name (clips) must be a regular file where
+    it exists, checked before USD opens it: a named pipe blocked USD's open() forever, and
+    the run could then not be stopped but by SIGKILL. A missing or unreadable layer is left
+    to the reader, which says so.
+
+    Raises:
+        ShotFileError: A layer or file the shot uses is not a regular file (names both).
+    """
+    if not os.path.isfile(shot):
+        return  # the shot itself: checked (or reported missing) by its reader
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from pxr import Sdf, Tf
+
+    trap_type = getattr(Tf, "DiagnosticTrap", None)
+    seen = {os.path.realpath(shot)}
+    todo = [os.path.realpath(shot)]
+    while todo:
+        path = todo.pop()
+        trap: Any = trap_type() if trap_type is not None else contextlib.nullcontext()
+        try:
+            with trap as caught:
+                layer = Sdf.Layer.FindOrOpen(path)
+                if caught is not None:
+                    caught.Clear()
+        except Exception:
+            continue
+        if layer is None:
+            continue
+        named = [*layer.GetCompositionAssetDependencies(), *layer.GetExternalAssetDependencies()]
+        for asset in named:
+            found = layer.ComputeAbsolutePath(asset) if asset else ""
+            if not found or not os.path.exists(found):
+                continue
+            real = os.path.realpath(found)
+            mode = os.stat(real).st_mode
+            if not stat.S_ISREG(mode):
+                msg = (f"{one_line(shot)}: {one_line(found)} (used by {one_line(path)}) is "
+                       f"{file_kind(mode)}, not a regular file")
+                raise ShotFileError(msg)
+            if real not in seen and asset in layer.GetCompositionAssetDependencies():
+                seen.add(real)
+                todo.append(real)
+
+
 def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
     """Every file the USD shot pulls in: sublayers, references, payloads, clips (not itself).
 
-    Uses ``UsdUtils.ComputeAllDependencies``. A shot USD cannot open gives an empty list
-    (reading it reports the error); USD's diagnostics are kept off stderr.
+    Uses ``UsdUtils.ComputeAllDependencies``. A shot USD cannot open, or one that uses a
+    layer that is no regular file (:func:`require_regular_layers`: USD would block on a named
+    pipe), gives an empty list (reading it reports the error); USD's diagnostics are kept
+    off stderr.
     """
+    try:
+        require_regular_layers(shot)
+    except ShotFileError:
+        return []
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
         from pxr import Sdf, Tf, UsdUtils  # (UsdUtils loads UsdShade and Sdr: ~0.1 s)
 

@@ -559,3 +559,29 @@ def test_a_newline_in_a_file_name_keeps_every_error_one_line(tmp_path: Path) -> 
         assert proc.returncode == 2, (name, proc.stderr)
         line = error_line(proc)
         assert re.search(r"(gone|robot|take|job)\\n", line), (name, line)
+
+
+def test_a_named_pipe_among_a_shots_layers_is_bad_input_not_a_hang(tmp_path: Path) -> None:
+    """Trial 22: a shot whose reference or sublayer is a named pipe hung every command in
+    USD's open() (SIGTERM could not stop it); now it is exit 2 naming the pipe, before USD
+    opens anything, and batch fails that shot alone."""
+    whip = (ROOT / "samples" / "shots" / "whip_pan.usda").read_text(encoding="utf-8")
+    os.mkfifo(tmp_path / "pipe.usda")
+    ref = tmp_path / "ref.usda"
+    ref.write_text(whip.replace('def Xform "World"\n{', 'def Xform "World"\n{\n'
+                                '    def "r" (references = @./pipe.usda@) { }', 1),
+                   encoding="utf-8")
+    sub = tmp_path / "sub.usda"
+    sub.write_text(whip.replace("(\n", "(\n    subLayers = [@./pipe.usda@]\n", 1),
+                   encoding="utf-8")
+    for shot in (ref, sub):
+        assert "pipe.usda" in shot.read_text(encoding="utf-8")
+        for args in (["check", shot], ["convert", shot, "-o", tmp_path / "x.mcap"],
+                     ["place", shot, "-q"]):
+            proc = run_cli(*args)  # (a hang: the 600 s timeout)
+            assert proc.returncode == 2, (args, proc.stderr)
+            assert "pipe.usda" in proc.stderr and "named pipe" in proc.stderr, proc.stderr
+    proc = run_cli("batch", ref, SHOTS / "maya_dolly_push_in.usda", "-o", tmp_path / "b", "-q")
+    report = json.loads((tmp_path / "b" / "batch_report.json").read_text(encoding="utf-8"))
+    status = {Path(s["shot"]).name: s["status"] for s in report["shots"]}
+    assert status == {"ref.usda": "failed", "maya_dolly_push_in.usda": "ok"}, proc.stderr
