@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -388,6 +388,7 @@ def convert(
     rig_layer: str | Path | None = None,
     foxglove_layout: str | Path | None = None,
     report: str | Path | None = None,
+    more_inputs: Sequence[tuple[Path, str]] = (),
 ) -> dict[str, Any]:
     """Convert one shot to a motion-control MCAP; returns the JSON-able summary.
 
@@ -401,7 +402,9 @@ def convert(
     named; a failed or interrupted run writes nothing and leaves existing outputs untouched,
     except that a report asked for alone (``check --report``) is written for a shot that
     cannot be done, showing why. ``progress`` is told of each stage (see
-    :mod:`camtraj.progress`; the CLI shows it on a terminal).
+    :mod:`camtraj.progress`; the CLI shows it on a terminal). ``more_inputs``: other files
+    the caller read for the run, (path, what it is) (a farm task's manifest), which no
+    output may be either.
     """
     options = options or ConvertOptions()
     progress = progress or Silent()
@@ -417,7 +420,7 @@ def convert(
                 outputs.add(path, label)
         if outputs.paths:
             require_regular_files(shot_path, options)
-            outputs.refuse_inputs(run_inputs(shot_path, options))
+            outputs.refuse_inputs([*run_inputs(shot_path, options), *more_inputs])
         started: list[Analysis] = []
         try:
             analysis = analyse(shot_path, options, progress=progress, on_start=started.append)

@@ -668,7 +668,8 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
     # task leaves every file as it was)
     try:
         result: dict[str, Any] = convert(shot, output, options, summary_path=summary,
-                                         rig_layer=rig)
+                                         rig_layer=rig,
+                                         more_inputs=[(path, "the task manifest")])
     except InfeasibleError as exc:  # the log names its shot, as a task that succeeds does (a
         # bad input's message names its file already)
         exc.add_note(f"task {index} of {one_line(path.name)}: the shot {one_line(shot)}")

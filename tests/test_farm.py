@@ -322,3 +322,20 @@ def test_usd_rig_layers_in_openjd_and_opencue_jobs(project: Path, tmp_path: Path
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert run2.returncode == 0, run2.stderr
     assert _rig_camera_count(project / "cue" / "orbit.rig.usda") == 1
+
+
+@pytest.mark.parametrize("key", ["output", "summary"])
+def test_a_task_cannot_write_over_its_own_manifest(tmp_path: Path, key: str) -> None:
+    """Trial 22: a manifest whose task's output (or summary) was the manifest itself ran,
+    exit 0, and the manifest became MCAP bytes (or a summary)."""
+    manifest = tmp_path / "job.tasks.json"
+    task = {"shot": str(SAMPLES / "maya_dolly_push_in.usda"), "output": "t.mcap",
+            "summary": "t.json", key: manifest.name}
+    manifest.write_text(json.dumps({"format": farm.MANIFEST_FORMAT, "options": {},
+                                    "camtraj_version": camtraj.__version__, "tasks": [task]}),
+                        encoding="utf-8")
+    before = manifest.read_bytes()
+    run = _run("farm", "run-task", str(manifest), "1")
+    assert run.returncode == 2, run.stderr
+    assert "it is the task manifest" in run.stderr, run.stderr
+    assert manifest.read_bytes() == before and not (tmp_path / "t.mcap").exists()
