@@ -52,6 +52,7 @@ from camtraj.folders import check_can_make, make_parent, remove_empty
 from camtraj.inputs import (
     files_read,
     one_line,
+    parse_json,
     read_text,
     require_regular_file,
     require_regular_layers,
@@ -493,10 +494,12 @@ def _unreadable(shot: str) -> str | None:
 
 def _read_summary(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(read_text(path, "summary", InputError))
-    except (InputError, ValueError):
+        data = parse_json(read_text(path, "summary", InputError), str(path), InputError)
+    except InputError:
         return {}
-    return data if isinstance(data, dict) else {}
+    # a summary edited or damaged into another shape is as good as none: the shot converts
+    ok = isinstance(data, dict) and isinstance(data.get("warnings", []), list)
+    return data if ok else {}
 
 
 def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any]]) -> ShotResult:

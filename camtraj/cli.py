@@ -28,6 +28,7 @@ from camtraj.errors import (
     CamtrajError,
     CollisionError,
     InfeasibleError,
+    InputError,
     LensRangeError,
     UnreachableFramesError,
     failure_lines,
@@ -371,6 +372,16 @@ def info(mcap_file: str, as_json: bool) -> None:
     if as_json:
         click.echo(jsonsafe.dumps(d, sort_keys=True))
         return
+    try:
+        click.echo(_info_text(d))
+    except (AttributeError, IndexError, KeyError, TypeError, ValueError) as exc:
+        _fail(InputError(f"{one_line(mcap_file)}: its camtraj metadata is not as camtraj writes "
+                         f"it ({type(exc).__name__}: {one_line(str(exc))}): the file was edited "
+                         "or written by another program"))
+
+
+def _info_text(d: dict[str, Any]) -> str:
+    """``camtraj info``'s text of :func:`camtraj.mcap_io.describe`'s dict."""
     meta = d.get("metadata") or {}
     fr = d.get("frames") or {}
     mode = meta.get("timing_mode")
@@ -401,7 +412,7 @@ def info(mcap_file: str, as_json: bool) -> None:
               for t in d["topics"]]
     lines += _limits_used(d)
     lines += _controller_counts(d.get("controller"))
-    click.echo("\n".join(lines))
+    return "\n".join(lines)
 
 
 def _start_and_end(d: dict[str, Any]) -> list[str]:

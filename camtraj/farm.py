@@ -65,7 +65,7 @@ from camtraj.batch import output_names
 from camtraj.choices import FOCAL_LENGTH_UNITS, OBJECTIVES, TIMING_MODES
 from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
 from camtraj.folders import check_can_make
-from camtraj.inputs import files_read, one_line, read_text, require_regular_file
+from camtraj.inputs import files_read, one_line, parse_json, read_text, require_regular_file
 from camtraj.options import (
     EDGE_OPTIONS,
     RATE_RANGE,
@@ -628,11 +628,7 @@ def run_task(manifest: str | os.PathLike[str], index: int) -> dict[str, Any]:
     if not path.is_absolute() and job_dir:
         path = Path(job_dir) / path
     where = f"task manifest {one_line(path)}"
-    try:
-        data = json.loads(read_text(path, "task manifest", InputError))
-    except ValueError as exc:
-        msg = f"{where}: not JSON ({exc})"
-        raise InputError(msg) from None
+    data = parse_json(read_text(path, "task manifest", InputError), where, InputError)
     if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT:
         msg = f"{where}: not a camtraj task manifest (format {MANIFEST_FORMAT})"
         raise InputError(msg)

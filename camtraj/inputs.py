@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import codecs
 import contextlib
+import json
 import os
 import stat
 import tomllib
@@ -35,6 +36,7 @@ if TYPE_CHECKING:  # a type only (options imports robot, which reads its file he
 __all__ = [
     "files_read",
     "one_line",
+    "parse_json",
     "read_text",
     "require_regular_file",
     "require_regular_files",
@@ -63,12 +65,30 @@ def require_regular_file(path: str | os.PathLike[str], what: str, error: type[In
 
 
 def parse_toml(text: str, where: str, error: type[InputError]) -> dict[str, Any]:
-    """The table of a TOML text; a syntax error is one line naming ``where`` (the file)."""
+    """The table of a TOML text; a syntax error is one line naming ``where`` (the file), and
+    so is what the parser cannot hold (arrays nested thousands deep, a 5,000-digit number)."""
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         msg = f"{where}: not valid TOML ({exc})"
         raise error(msg) from None
+    except (RecursionError, ValueError) as exc:
+        msg = f"{where}: not a TOML file camtraj can read ({_why(exc)})"
+        raise error(msg) from None
+
+
+def parse_json(text: str, where: str, error: type[InputError]) -> Any:
+    """The value of a JSON text; a syntax error is one line naming ``where`` (the file), and
+    so is what the parser cannot hold (arrays nested thousands deep, a 5,000-digit number)."""
+    try:
+        return json.loads(text)
+    except (RecursionError, ValueError) as exc:
+        msg = f"{where}: not JSON camtraj can read ({_why(exc)})"
+        raise error(msg) from None
+
+
+def _why(exc: Exception) -> str:
+    return "nested too deep" if isinstance(exc, RecursionError) else one_line(str(exc))
 
 
 def reject_unknown_keys(table: dict[str, Any], allowed: set[str], where: str, what: str,

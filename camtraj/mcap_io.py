@@ -1615,5 +1615,5 @@ def _json_or_none(text: str | None) -> Any:
         return None
     try:
         return json.loads(text)
-    except ValueError:
+    except (RecursionError, ValueError):
         return None

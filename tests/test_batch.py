@@ -519,3 +519,16 @@ def test_the_table_lines_up_with_wide_characters_in_a_shot_name() -> None:
     rows = table.splitlines()[1:3]
     starts = [columns(row[:row.index("1-24")]) for row in rows]
     assert starts[0] == starts[1], table
+
+
+def test_a_damaged_summary_in_the_output_folder_is_as_good_as_none(tmp_path: Path) -> None:
+    """Trial 22: a summary nested thousands deep, or with "warnings": 5, crashed batch
+    (exit 1, no report) where a garbage one was converted again."""
+    from camtraj.batch import _read_summary
+
+    summary = tmp_path / "dolly.summary.json"
+    for text in ("[" * 100_000 + "]" * 100_000, '{"warnings": 5}', "garbage", "[1, 2]"):
+        summary.write_text(text, encoding="utf-8")
+        assert _read_summary(summary) == {}, text
+    summary.write_text('{"warnings": ["w"], "max_speed": 2.0}', encoding="utf-8")
+    assert _read_summary(summary) == {"warnings": ["w"], "max_speed": 2.0}

@@ -369,6 +369,19 @@ def _corpus(base: Path, good_mcap: Path) -> tuple[dict[str, Case], Path]:
         edited = d / f"md_{name}.mcap"
         _rewrite_mcap(mcap, edited, **kw)
         add(f"report_{name}", ["report", edited, "-o", "r.html"], must)
+    # trial 22: info trusted the metadata's types (tracebacks), deep JSON broke both
+    deep = "[" * 100_000 + "]" * 100_000
+    for name, kw in (
+        ("lower_words", {"edit": _robot_md("lower", '["x", "y"]')}),
+        ("peak_use_a_list", {"edit": _take_md("peak_use", "[1, 2]")}),
+        ("position_range_words", {"edit": _take_md("position_range", '{"track": "far"}')}),
+    ):
+        edited = d / f"info_{name}.mcap"
+        _rewrite_mcap(mcap, edited, **kw)
+        add(f"info_{name}", ["info", edited], "metadata")
+    nested = d / "md_nested.mcap"
+    _rewrite_mcap(mcap, nested, edit=_take_md("placement", deep))
+    add("report_nested_metadata", ["report", nested, "-o", "r.html"], "nested")
 
     # 2. Collision geometry camtraj cannot check is bad input, named
     coll_set = d / "collision.toml"

@@ -158,3 +158,16 @@ def test_a_scene_file_given_as_the_set_file_is_named_as_one(tmp_path: Path) -> N
     scene.write_text('name = "sc12"\n[[shot]]\npath = "a.usda"\n', encoding="utf-8")
     with pytest.raises(InputError, match=r"a scene file, which `camtraj place --scene` takes"):
         SetFile.read(scene)
+
+
+def test_toml_and_json_the_parsers_cannot_hold_are_one_line_errors() -> None:
+    """Trial 22: arrays nested thousands deep (RecursionError, ~3,000 traceback lines) and
+    a 5,000-digit number (ValueError) went past the TOML and JSON checks as tracebacks."""
+    from camtraj.inputs import parse_json, parse_toml
+
+    for text in ("a = " + "[" * 20_000 + "]" * 20_000, "a = " + "9" * 5_000):
+        with pytest.raises(InputError, match=r"^set file x\.toml: not a TOML file camtraj can "):
+            parse_toml(text, "set file x.toml", InputError)
+    for text in ("[" * 100_000 + "]" * 100_000, "9" * 5_000, "{x"):
+        with pytest.raises(InputError, match=r"^m\.json: not JSON camtraj can read"):
+            parse_json(text, "m.json", InputError)

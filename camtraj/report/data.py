@@ -456,7 +456,7 @@ def from_take(take: ReportTake, source: str | Path) -> ReportData:
         edges = json.loads(md["edge_peak_use"]) if "edge_peak_use" in md else None
         steps = json.loads(md["servo_step_ms"]) if "servo_step_ms" in md else None
         travel = json.loads(md["edge_camera_travel"]) if "edge_camera_travel" in md else None
-    except ValueError as exc:
+    except (RecursionError, ValueError) as exc:
         msg = f"{where} cannot be read ({exc})"
         raise InputError(msg) from None
     _check_placement(placement, f"{where} placement")
@@ -536,7 +536,7 @@ def _lens_axes(text: str | None, where: str) -> dict[str, dict[str, Any]]:
         return {}
     try:
         axes = json.loads(text)["axes"]
-    except (ValueError, KeyError, TypeError):
+    except (RecursionError, ValueError, KeyError, TypeError):
         axes = None
     if not isinstance(axes, dict) or not all(isinstance(v, dict) for v in axes.values()):
         msg = f"{where} must name the lens axes and their limits"
@@ -550,7 +550,7 @@ def _joined(text: str | None, lens: dict[str, dict[str, Any]], key: str) -> str 
         return text
     try:
         values = json.loads(text)
-    except ValueError:
+    except (RecursionError, ValueError):
         return text
     extra = [axis.get(key) for axis in lens.values()]
     return json.dumps(values + extra) if isinstance(values, list) else text
@@ -560,7 +560,7 @@ def _numbers(text: str | None, n: int, where: str) -> Array:
     """``n`` finite numbers from a JSON list, or InputError naming ``where``."""
     try:
         value = json.loads(text) if text is not None else None
-    except ValueError:
+    except (RecursionError, ValueError):
         value = None
     ok = isinstance(value, list) and len(value) == n and all(
         isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
@@ -628,7 +628,7 @@ def _travel_ok(t: Any) -> bool:
 def _float(text: str | None) -> float:
     try:
         return float(text) if text is not None else math.nan
-    except ValueError:
+    except (RecursionError, ValueError):
         return math.nan
 
 
