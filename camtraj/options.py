@@ -99,6 +99,12 @@ class ConvertOptions:
         if self.edges not in EDGE_OPTIONS:
             msg = f"edges must be one of {', '.join(EDGE_OPTIONS)}, got {self.edges!r}"
             raise InputError(msg)
+        if self.placement is not None and not (
+                all(abs(v) <= 1e6 for v in self.placement[:3])
+                and abs(self.placement[3]) <= 360.0):
+            msg = (f"placement must be x, y, z within ±1e6 m and yaw within ±360 deg (as a set "
+                   f"file's [placement]), got {','.join(f'{v:g}' for v in self.placement)}")
+            raise InputError(msg)
 
     @property
     def timing_edges(self) -> str:

@@ -301,6 +301,9 @@ def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
 MAX_FILE_VALUE = 1.0e6
 """Largest magnitude of a joint limit in a robot file (m, deg; per s, s², s³): beyond it the
 solver's arithmetic overflows, and no machine comes near it."""
+MIN_FILE_RATE = 1e-3
+"""The smallest velocity, acceleration or jerk limit a robot file may give, in its units (m or
+deg per s, s², s³): below it no take is a shot (1e-300 broke the solver with a traceback)."""
 
 
 def _read_text(path: Path) -> str:
@@ -373,9 +376,9 @@ def _robot_from_dict(data: dict[str, Any], source: str) -> Robot:
         if max(abs(jt["min"]), abs(jt["max"])) > MAX_FILE_VALUE:
             raise fail(key, f"min and max must lie within ±{MAX_FILE_VALUE:g}")
         for col in ("max_velocity", "max_acceleration", "max_jerk"):
-            if not 0 < jt[col] <= MAX_FILE_VALUE:
-                raise fail(f"{key}.{col}", f"= {jt[col]}: must be positive and at most "
-                           f"{MAX_FILE_VALUE:g}")
+            if not MIN_FILE_RATE <= jt[col] <= MAX_FILE_VALUE:
+                raise fail(f"{key}.{col}", f"= {jt[col]}: must be between {MIN_FILE_RATE:g} "
+                           f"and {MAX_FILE_VALUE:g}")
         if cols["weight"][-1] < 0:
             raise fail(f"{key}.weight", f"= {jt['weight']}: must not be negative")
         if not lo <= cols["home"][-1] <= hi:

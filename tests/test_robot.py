@@ -77,7 +77,11 @@ def test_controller_units_reproduce_ga_eq22(tmp_path: Path) -> None:
     [
         ("max_velocity = 90.0\n", "", ["joints.rotate.max_velocity", "missing"]),
         ("max = 1.5\n", "max = -1.5\n", ["joints.extend", "min", "max"]),
-        ("max_jerk = 15.0", "max_jerk = -1.0", ["joints.track.max_jerk", "positive"]),
+        ("max_jerk = 15.0", "max_jerk = -1.0", ["joints.track.max_jerk", "between 0.001"]),
+        # trial 22: a limit of 1e-300 passed and broke the solver with a traceback
+        ("max_jerk = 15.0", "max_jerk = 1e-300", ["joints.track.max_jerk", "between 0.001"]),
+        ("max_velocity = 90.0\n", "max_velocity = 1e-30\n",
+         ["joints.rotate.max_velocity", "between 0.001"]),
         ("r6 = 0.963", "r6 = 0.963\nr7 = 1.0", ["unknown key", "r7"]),
         ("min = -180.0", "min = -200.0", ["joints.elbow", "-180, 0"]),
         ('angle_unit = "deg"', 'angle_unit = "grad"', ["angle_unit", "deg"]),

@@ -171,3 +171,12 @@ def test_toml_and_json_the_parsers_cannot_hold_are_one_line_errors() -> None:
     for text in ("[" * 100_000 + "]" * 100_000, "9" * 5_000, "{x"):
         with pytest.raises(InputError, match=r"^m\.json: not JSON camtraj can read"):
             parse_json(text, "m.json", InputError)
+
+
+def test_a_placement_on_the_command_line_has_a_set_files_bounds() -> None:
+    """Trial 22: --placement 1e300,0,0,0 was taken (a set file caps x, y, z at 1e6 m), and
+    every frame's miss was printed with 300 digits."""
+    for bad in ((1e300, 0.0, 0.0, 0.0), (0.0, 0.0, -2e6, 0.0), (0.0, 0.0, 0.0, 400.0)):
+        with pytest.raises(InputError, match=r"placement must be x, y, z within ±1e6 m"):
+            ConvertOptions(placement=bad)
+    assert ConvertOptions(placement=(1e6, -1e6, 0.0, -360.0)).placement is not None
