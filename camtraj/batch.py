@@ -68,6 +68,7 @@ from camtraj.options import (
 )
 from camtraj.outputs import (
     OutputSet,
+    check_destination,
     refuse_overlaps,
     remove_stale_temps,
 )
@@ -583,6 +584,7 @@ def run_batch(
     check_can_make(out / REPORT_NAME, "-o")
     made = make_parent(out / REPORT_NAME, "-o")
     try:
+        check_destination(out / REPORT_NAME, "the batch report")  # written last: checked first
         return _run_shots(shots, names, out, options, jobs, force, progress, rig_layers, start)
     except BaseException:  # stopped before its report: the folders it made go if still empty
         remove_empty(made)

@@ -66,6 +66,7 @@ from camtraj.inputs import one_line
 __all__ = [
     "TEMP_MARK",
     "OutputSet",
+    "check_destination",
     "refuse_overlaps",
     "remove_stale_temps",
     "temp_name",
@@ -127,6 +128,14 @@ def remove_stale_temps(folder: str | os.PathLike[str], name: str | None = None) 
             os.unlink(entry.path)
             removed.append(Path(entry.path))
     return removed
+
+
+def check_destination(path: str | os.PathLike[str], label: str = "") -> None:
+    """The checks :meth:`OutputSet.add` makes of a destination, for an output written only at
+    the end of a long run (batch's report): its folder exists and it is a regular file or
+    nothing. Raises InputError naming it."""
+    given = os.fsdecode(path)
+    OutputSet._check_destination(_Output(given, label, Path(os.path.realpath(given))))
 
 
 def _same_file(a: os.stat_result, b: os.stat_result) -> bool:

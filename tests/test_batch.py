@@ -532,3 +532,14 @@ def test_a_damaged_summary_in_the_output_folder_is_as_good_as_none(tmp_path: Pat
         assert _read_summary(summary) == {}, text
     summary.write_text('{"warnings": ["w"], "max_speed": 2.0}', encoding="utf-8")
     assert _read_summary(summary) == {"warnings": ["w"], "max_speed": 2.0}
+
+
+def test_a_report_path_batch_cannot_write_is_refused_before_any_shot(tmp_path: Path) -> None:
+    """Trial 22: batch_report.json a folder (or a pipe): every shot was converted, then the
+    run failed to write its report. The report is checked with the other outputs, first."""
+    out = tmp_path / "out"
+    (out / "batch_report.json").mkdir(parents=True)
+    proc = _run("batch", str(SAMPLES / "maya_dolly_push_in.usda"), "-o", str(out), "-q")
+    assert proc.returncode == 2, proc.stderr
+    assert "batch_report.json: it is a folder" in proc.stderr, proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["batch_report.json"]
