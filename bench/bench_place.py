@@ -174,7 +174,8 @@ def run(log: Callable[[str], None] = print, frames: int = 240, jobs: int = 2) ->
         out["place_best_speed"] = float(best["max_speed"] or 0.0)
 
         log("one full solve at the best placement (baseline)")
-        options = ConvertOptions(placement=(best["x"], best["y"], 0.0, best["yaw_deg"]),
+        options = ConvertOptions(placement=(best["x"], best["y"], float(rep["base_z"]),  # type: ignore[arg-type]
+                                            best["yaw_deg"]),
                                  timing="scale")
         t0 = time.perf_counter()
         analysis = analyse(shot, options)

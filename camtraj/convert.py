@@ -161,17 +161,21 @@ def placement_notes(options: ConvertOptions, placement: Placement, robot: Robot,
     from camtraj.set_file import floor_polygon
 
     def polygon(points: Array, key: str) -> Array:
-        return floor_polygon(points, shot.meters_per_unit, shot.up_axis, where, key)
+        return floor_polygon(points, shot.meters_per_unit, shot.up_axis, f"set file {where}",
+                             key)
 
+    try:  # a polygon place would refuse is not this run's error: said, not raised
+        region = None if sf.region is None else polygon(sf.region, "floor.region")
+        keep_out = [polygon(k, f"floor.keep_out[{i}]") for i, k in enumerate(sf.keep_out)]
+    except InputError as exc:
+        return (f"the rail's footprint was not checked against the floor: {exc}",)
     R, (x, y, _z) = placement.base2world[:3, :3], placement.base2world[:3, 3]
     at = (np.array([x]), np.array([y]), np.array([math.degrees(math.atan2(R[1, 0], R[0, 0]))]))
     notes = []
-    if sf.region is not None and not floor_ok(robot, *at, polygon(sf.region, "floor.region"),
-                                              [])[0]:
+    if region is not None and not floor_ok(robot, *at, region, [])[0]:
         notes.append(f"the rail at this placement is not wholly inside the floor region of "
                      f"{where}")
-    crossed = [i for i, k in enumerate(sf.keep_out)
-               if not floor_ok(robot, *at, None, [polygon(k, f"floor.keep_out[{i}]")])[0]]
+    crossed = [i for i, k in enumerate(keep_out) if not floor_ok(robot, *at, None, [k])[0]]
     if crossed:
         which = ", ".join(f"keep_out[{i}]" for i in crossed)
         notes.append(f"the rail at this placement crosses {which} of {where}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import codecs
 import contextlib
+import functools
 import json
 import os
 import stat
@@ -34,6 +35,7 @@ if TYPE_CHECKING:  # a type only (options imports robot, which reads its file he
     from camtraj.options import ConvertOptions
 
 __all__ = [
+    "MIN_FILE_RATE",
     "files_read",
     "one_line",
     "parse_json",
@@ -45,6 +47,10 @@ __all__ = [
     "shot_layers",
 ]
 
+MIN_FILE_RATE = 1e-3
+"""The smallest velocity, acceleration or jerk limit a robot or lens file may give, in its
+units (m or deg per s, s², s³): below it no take is a shot (1e-300 broke the solver with a
+traceback)."""
 MAX_TEXT_BYTES = 64 * 1024 * 1024
 """Largest robot, set or manifest file read [bytes]; more is not a hand-written file."""
 
@@ -156,7 +162,8 @@ def read_text(path: str | os.PathLike[str], what: str, error: type[InputError]) 
 
 
 def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions) -> None:
-    """The shot, robot file, set file and lens file of a run must be regular files.
+    """The shot, robot file, set file and lens file of a run must be regular files, and no
+    layer of the shot a named pipe or a device (:func:`require_regular_layers`).
 
     The shot's name must also be valid UTF-8: USD takes file names as UTF-8 text.
     """
@@ -177,23 +184,42 @@ def require_regular_files(shot: str | os.PathLike[str], options: ConvertOptions)
 
 
 def require_regular_layers(shot: str | os.PathLike[str]) -> None:
-    """Every layer the shot pulls in (sublayers, references and payloads, through the layers
-    they pull in) and every other file its layers name (clips) must be a regular file where
-    it exists, checked before USD opens it: a named pipe blocked USD's open() forever, and
-    the run could then not be stopped but by SIGKILL. A missing or unreadable layer is left
-    to the reader, which says so.
+    """No layer the shot pulls in (sublayers, references and payloads, through the layers they
+    pull in) and no other file its layers name (clips) may be a named pipe, a device or a
+    socket, checked before USD opens it: USD's open() blocked forever on a named pipe, and
+    the run could then be stopped only by SIGKILL. Paths are resolved as USD resolves them
+    (relative to the layer as opened, search paths, format arguments stripped); a missing
+    layer, a folder or a layer in an unselected variant is left to the reader. Not covered:
+    paths built from expression variables and template clip paths (``clip.###.usd``).
 
     Raises:
-        ShotFileError: A layer or file the shot uses is not a regular file (names both).
+        ShotFileError: A file the shot uses would block a reader (names it and its user).
     """
-    if not os.path.isfile(shot):
+    try:
+        st = os.stat(shot)
+    except (OSError, ValueError):
         return  # the shot itself: checked (or reported missing) by its reader
-    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
-        from pxr import Sdf, Tf
+    if not stat.S_ISREG(st.st_mode):
+        return
+    found = _blocking_layer(os.path.abspath(shot), st.st_mtime_ns)
+    if found is not None:
+        path, user, kind = found
+        msg = (f"{one_line(shot)}: {one_line(path)} (used by {one_line(user)}) is {kind}, "
+               "not a regular file")
+        raise ShotFileError(msg)
 
+
+@functools.lru_cache(maxsize=32)  # one walk per shot and run: every command asks 2-4 times
+def _blocking_layer(root: str, mtime_ns: int) -> tuple[str, str, str] | None:
+    """The first file under ``root``'s layers that would block a reader: (path, the layer
+    naming it, what it is); None when there is none (``mtime_ns`` keys the cache)."""
+    with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
+        from pxr import Ar, Sdf, Tf
+
+    resolver = Ar.GetResolver()
     trap_type = getattr(Tf, "DiagnosticTrap", None)
-    seen = {os.path.realpath(shot)}
-    todo = [os.path.realpath(shot)]
+    seen = {root}
+    todo = [root]
     while todo:
         path = todo.pop()
         trap: Any = trap_type() if trap_type is not None else contextlib.nullcontext()
@@ -202,24 +228,28 @@ def require_regular_layers(shot: str | os.PathLike[str]) -> None:
                 layer = Sdf.Layer.FindOrOpen(path)
                 if caught is not None:
                     caught.Clear()
-        except Exception:
+        except Exception:  # USD's own errors: the reader reports them
             continue
         if layer is None:
             continue
-        named = [*layer.GetCompositionAssetDependencies(), *layer.GetExternalAssetDependencies()]
-        for asset in named:
-            found = layer.ComputeAbsolutePath(asset) if asset else ""
-            if not found or not os.path.exists(found):
+        composed = set(layer.GetCompositionAssetDependencies())
+        for asset in [*composed, *layer.GetExternalAssetDependencies()]:
+            name = Sdf.Layer.SplitIdentifier(asset)[0] if asset else ""
+            where = str(resolver.Resolve(Sdf.ComputeAssetPathRelativeToLayer(layer, name))) \
+                if name else ""
+            if not where or not os.path.isabs(where):
                 continue
-            real = os.path.realpath(found)
-            mode = os.stat(real).st_mode
-            if not stat.S_ISREG(mode):
-                msg = (f"{one_line(shot)}: {one_line(found)} (used by {one_line(path)}) is "
-                       f"{file_kind(mode)}, not a regular file")
-                raise ShotFileError(msg)
-            if real not in seen and asset in layer.GetCompositionAssetDependencies():
-                seen.add(real)
-                todo.append(real)
+            try:
+                mode = os.stat(where).st_mode
+            except OSError:
+                continue
+            if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode) or stat.S_ISBLK(mode) \
+                    or stat.S_ISSOCK(mode):
+                return where, path, file_kind(mode)
+            if stat.S_ISREG(mode) and asset in composed and where not in seen:
+                seen.add(where)
+                todo.append(where)
+    return None
 
 
 def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from camtraj.controller import CONTROLLER_KEYS, ControllerUnits, controller_units
 from camtraj.errors import InputError, LensFileError, LensRangeError, frame_ranges
-from camtraj.inputs import one_line, parse_toml, read_text, reject_unknown_keys
+from camtraj.inputs import MIN_FILE_RATE, one_line, parse_toml, read_text, reject_unknown_keys
 
 if TYPE_CHECKING:
     from camtraj.timing import Limits
@@ -502,10 +502,11 @@ def _axis(r: _Reader, tab: dict[str, Any], axis: str, ang: float) -> LensAxis:
     limits = {}
     for key in ("min", "max", "max_velocity", "max_acceleration", "max_jerk"):
         value = r.number(r.required(tab, key, axis), f"{axis}.{key}")
-        if abs(value) > MAX_MOTOR or (key.startswith("max_") and not value > 0):
-            raise r.fail(f"{axis}.{key}", f"= {value:g}: must be "
-                         + ("positive and " if key.startswith("max_") else "")
-                         + f"within ±{MAX_MOTOR:g}")
+        if key.startswith("max_") and not MIN_FILE_RATE <= value <= MAX_MOTOR:
+            raise r.fail(f"{axis}.{key}", f"= {value:g}: must be between {MIN_FILE_RATE:g} "
+                         f"and {MAX_MOTOR:g}")
+        if abs(value) > MAX_MOTOR:
+            raise r.fail(f"{axis}.{key}", f"= {value:g}: must be within ±{MAX_MOTOR:g}")
         limits[key] = value * ang
     if not limits["min"] < limits["max"]:
         raise r.fail(axis, f"min ({tab['min']}) must be below max ({tab['max']})")

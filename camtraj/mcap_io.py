@@ -1499,7 +1499,8 @@ def _bad_trajectory(path: Path, what: str) -> InputError:
 def describe(path: str | Path) -> dict[str, Any]:
     """A JSON-friendly summary of a camtraj MCAP file, for ``camtraj info``.
 
-    Reads the summary section and decodes only /shot/frames and the metadata.
+    Reads the summary section and decodes only /shot/frames, the metadata and the first and
+    last /joint_states samples.
 
     Returns:
         Keys: ``path``, ``size_bytes``, ``profile``, ``library``, ``source_file``,

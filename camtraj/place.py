@@ -1,9 +1,10 @@
 """``camtraj place``: where to lay the track so the robot can do the shot.
 
-The search is over the robot base's x, y and yaw about up on the floor (z is the set file's
-floor height). Placements rank by: every frame reachable, no collision with the set's
-obstacles, feasible with the timing asked (``--timing``: at the shot's own unless scale or
-optimal), then the largest maximum feasible speed (to 1 %), then the largest margins
+The search is over the robot base's x, y and yaw about up on the floor (the rail lies on the
+set file's floor, the base :data:`~camtraj.urdf.RAIL_HEIGHT` above it). Placements rank by:
+every frame reachable, no collision with the set's obstacles, feasible with the timing asked
+(``--timing``: at the shot's own unless scale or optimal), then the largest maximum feasible
+speed (to 1 %), then the largest margins
 (position limits, wrist singularity, full stretch).
 
 1. Cheap tests first, on every candidate of a coarse grid at once: the camera path against the
@@ -777,7 +778,7 @@ LIMITS_USE = ("limits use: the robot's peak position use (a lens's motors apart:
               "moves them), 0% mid-range, 100% touching a limit")
 
 
-def _heights(floor_z: float, base_z: float) -> str:
+def heights(floor_z: float, base_z: float) -> str:
     """'floor z 0.000 m, base 0.180 m on the rail': the floor's height and the base's."""
     return f"floor z {floor_z:.3f} m, base {base_z:.3f} m on the rail"
 
@@ -785,7 +786,7 @@ def _heights(floor_z: float, base_z: float) -> str:
 def table(report: PlaceReport) -> str:
     """The ranked placements for people."""
     lines = [f"{report.shot}: {report.evaluated} placements solved, {report.screened} screened, "
-             f"in {report.seconds:.1f} s ({_heights(report.floor_z, report.base_z)})",
+             f"in {report.seconds:.1f} s ({heights(report.floor_z, report.base_z)})",
              "  #     x [m]     y [m]  yaw [deg]    speed  limits use  wrist  stretch  obstacle"
              "  set by",
              f"  ({LIMITS_USE}; wrist, stretch: margins)"]

@@ -141,8 +141,9 @@ def check_can_reach(env: Envelope, pts: Array, base_z: float) -> None:
     zlo, zhi = env.height_range
     h = pts[:, 2] - base_z
     if h.min() < zlo - env.offset or h.max() > zhi + env.offset:
-        msg = (f"the camera path's height above the floor ({h.min():.2f} to {h.max():.2f} m) "
-               f"exceeds the lift's reach ({zlo - env.offset:.2f} to {zhi + env.offset:.2f} m)")
+        msg = (f"the camera path's height above the robot's base ({h.min():.2f} to "
+               f"{h.max():.2f} m) exceeds the lift's reach ({zlo - env.offset:.2f} to "
+               f"{zhi + env.offset:.2f} m)")
         raise PlacementError(msg)
     if h.max() - h.min() > zhi - zlo + 2 * env.offset:
         msg = (f"the camera path's height range {h.max() - h.min():.2f} m exceeds the lift's "

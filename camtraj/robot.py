@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from camtraj.controller import CONTROLLER_KEYS, ControllerUnits, controller_units
 from camtraj.errors import InputError, RobotFileError
-from camtraj.inputs import parse_toml, read_text, reject_unknown_keys
+from camtraj.inputs import MIN_FILE_RATE, parse_toml, read_text, reject_unknown_keys
 
 if TYPE_CHECKING:
     from camtraj.lens import Lens
@@ -301,11 +301,6 @@ def link_frames(dh: DHConstants, q: ArrayLike) -> Array:
 MAX_FILE_VALUE = 1.0e6
 """Largest magnitude of a joint limit in a robot file (m, deg; per s, s², s³): beyond it the
 solver's arithmetic overflows, and no machine comes near it."""
-MIN_FILE_RATE = 1e-3
-"""The smallest velocity, acceleration or jerk limit a robot file may give, in its units (m or
-deg per s, s², s³): below it no take is a shot (1e-300 broke the solver with a traceback)."""
-
-
 def _read_text(path: Path) -> str:
     """The file's text, refusing what is not a regular UTF-8 file (a FIFO would block)."""
     return read_text(path, "robot file", RobotFileError)

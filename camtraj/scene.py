@@ -44,10 +44,10 @@ from camtraj.place import (
     LIMITS_USE,
     Layout,
     Problem,
-    _heights,
     _race,
     _Runner,
     columns,
+    heights,
     load_problem,
     screen,
     search,
@@ -436,16 +436,16 @@ def smallest_split(n: int, cheap: Callable[[tuple[int, ...]], bool],
 # For people
 # ---------------------------------------------------------------------------------------------
 
-HEADER = ("  shot                        speed  limits use  wrist  stretch  obstacle  set by")
+HEADER = ("   # shot                     speed  limits use  wrist  stretch  obstacle  set by")
 
 
 def _rows(report: SceneReport, lay: Layout) -> list[str]:
     lines = [f"  x {lay.x:.3f} m  y {lay.y:.3f} m  yaw {lay.yaw_deg:.2f} deg", HEADER]
     for i in sorted(lay.results):
         r = lay.results[i]
-        name = report.shots[i].name
-        short = name if len(name) <= 24 else "…" + name[-23:]
-        lines.append(f"  {short:<24}  {columns(r)}"
+        name = report.shots[i].name  # numbered: a cut name may hide which file it is
+        short = name if len(name) <= 21 else "…" + name[-20:]
+        lines.append(f"  {i + 1:>2} {short:<21}  {columns(r)}"
                      + ("  <- limits the layout" if i == lay.limiting and len(lay.order) > 1
                         else ""))
         if not r.ok:
@@ -458,13 +458,13 @@ def table(report: SceneReport) -> str:
     n = len(report.shots)
     lines = [f"layout {report.name}: {n} shots, {report.evaluated} shot placements solved, "
              f"{report.screened} screened, in {report.seconds:.1f} s "
-             f"({_heights(report.floor_z, report.base_z)})",
+             f"({heights(report.floor_z, report.base_z)})",
              f"  ({LIMITS_USE}; wrist, stretch: margins; obstacle: closest approach)"]
     if report.ok and report.layout is not None:
         lay = report.layout
         lines += _rows(report, lay)
         lines.append(f"  {report.shots[lay.limiting].name} limits the layout: "
-                     f"{_speed(lay.results[lay.limiting].max_speed)} of real time")
+                     f"{speed_percent(lay.results[lay.limiting].max_speed)} of real time")
         return "\n".join(lines)
     lines.append(f"  no single layout serves every shot: {report.reason}")
     if report.split is not None:
@@ -481,7 +481,3 @@ def split_text(report: SceneReport) -> str:
     assert report.split is not None
     return " | ".join(", ".join(report.shots[i].name for i in group)
                       for group, _ in report.split)
-
-
-def _speed(speed: float) -> str:
-    return speed_percent(speed)

@@ -87,7 +87,7 @@ class SetFile:
     def parse(cls, text: str, source: str = "<text>") -> SetFile:
         where = f"set file {source}"
         data = parse_toml(text, where, InputError)
-        if "shot" in data and "shot" not in _KEYS:  # a scene file given as the set file
+        if "shot" in data:  # a scene file given as the set file
             msg = (f"{where}: it lists shots ([[shot]]): a scene file, which `camtraj place "
                    "--scene` takes; a set file has [placement], [floor], [search], [collision]")
             raise InputError(msg)

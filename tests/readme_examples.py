@@ -98,7 +98,7 @@ def blocks(document: Path) -> list[Block]:
         rtol = _ROUND_OFF.search(note)
         out.append(Block(document, m.start(2), m.end(2), m.group(2),
                          NUMBER_RTOL if rtol is None else float(rtol.group(1)) / 100.0,
-                         "clock" in note.split(";") or note.strip() == "clock"))
+                         "clock" in (part.strip() for part in note.split(";"))))
     return out
 
 

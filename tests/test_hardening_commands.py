@@ -598,3 +598,33 @@ def test_a_named_pipe_among_a_shots_layers_is_bad_input_not_a_hang(tmp_path: Pat
     report = json.loads((tmp_path / "b" / "batch_report.json").read_text(encoding="utf-8"))
     status = {Path(s["shot"]).name: s["status"] for s in report["shots"]}
     assert status == {"ref.usda": "failed", "maya_dolly_push_in.usda": "ok"}, proc.stderr
+
+
+def test_the_layer_check_resolves_as_usd_does(tmp_path: Path) -> None:
+    """Review 56: the walk resolved a symlinked shot's relative layers from the link's target
+    (USD: from the link's folder), missed a pipe behind format arguments, and refused a
+    folder USD reports itself. Checked against the function, no USD stage opened."""
+    from camtraj.errors import ShotFileError
+    from camtraj.inputs import require_regular_layers
+
+    whip = (ROOT / "samples" / "shots" / "whip_pan.usda").read_text(encoding="utf-8")
+
+    def shot(path: Path, sublayer: str) -> Path:
+        path.write_text(whip.replace("(\n", f"(\n    subLayers = [@{sublayer}@]\n", 1),
+                        encoding="utf-8")
+        return path
+
+    (tmp_path / "here").mkdir()
+    (tmp_path / "there").mkdir()
+    target = shot(tmp_path / "there" / "shot.usda", "./sub.usda")
+    (tmp_path / "there" / "sub.usda").write_text("#usda 1.0\n", encoding="utf-8")
+    os.mkfifo(tmp_path / "here" / "sub.usda")
+    (tmp_path / "here" / "link.usda").symlink_to(target)
+    with pytest.raises(ShotFileError, match=r"here/sub\.usda .* named pipe"):
+        require_regular_layers(tmp_path / "here" / "link.usda")
+    require_regular_layers(target)  # its own sub.usda is a file
+    os.mkfifo(tmp_path / "pipe.usda")
+    with pytest.raises(ShotFileError, match="named pipe"):
+        require_regular_layers(shot(tmp_path / "args.usda", "./pipe.usda:SDF_FORMAT_ARGS:a=b"))
+    (tmp_path / "folder.usda").mkdir()
+    require_regular_layers(shot(tmp_path / "folder_sub.usda", "./folder.usda"))  # USD says

@@ -121,7 +121,9 @@ def _bad(tmp_path: Path, text: str) -> str:
                                               "outside the motor's range"]),
         ("[24.0, 0.0], [28.0, 8.0]", "[24.0]", ["[zoom.calibration]", "row 1", "pairs"]),
         ("min = -2.0", "min = 200.0", ["[zoom]", "below max"]),
-        ("max_jerk = 2400.0", "max_jerk = -1.0", ["[zoom.max_jerk]", "positive"]),
+        ("max_jerk = 2400.0", "max_jerk = -1.0", ["[zoom.max_jerk]", "between 0.001"]),
+        # review 56: 1e-300 passed, and check printed a 300-digit zoom velocity
+        ("max_jerk = 2400.0", "max_jerk = 1e-300", ["[zoom.max_jerk]", "between 0.001"]),
         ("max_jerk = 2400.0", "max_jerk = 2400.0\nspeed = 3", ["unknown key", "speed", "[zoom]"]),
         ('name = "Cine', 'focal_length = 35.0\nname = "Cine', ["[focal_length]", "zoom"]),
         ("sign = 1\n", "sign = 2\n", ["[controller.zoom.sign]", "1 or -1"]),

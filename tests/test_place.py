@@ -276,7 +276,7 @@ def test_place_with_the_wall_as_obstacle_keeps_the_clearance(
     ("shift", "stretch", "words"),
     [
         ((0.0, 0.0, 0.0), 60.0, ["camera path is", "long", "track"]),
-        ((0.0, 0.0, 15.0), 0.0, ["height above the floor", "lift's reach"]),
+        ((0.0, 0.0, 15.0), 0.0, ["height above the robot's base", "lift's reach"]),
     ],
 )
 def test_a_shot_no_placement_can_do_is_exit_3_with_the_reason(
@@ -491,7 +491,7 @@ def test_place_finds_a_flight_case_on_the_floor_across_the_rail(robot: Robot) ->
     from camtraj.usd_shot import read_shot
 
     shot = read_shot(Path(__file__).parent.parent / "samples" / "shots" / "maya_dolly_push_in.usda")
-    x, y, yaw = -4.325, 4.505, -43.12  # the README's best placement of the push-in
+    x, y, yaw = -4.325, 4.505, -43.12  # a placement that reaches the push-in (place's best once)
     rail = next(s for s in robot_solids(robot) if s.name == "rail")
     far_end = np.array([rail.xyz[0] + rail.size[0] / 2 - 0.5, 0.0, 0.0, 1.0])
     at = yaw_pose(x, y, 0.0, yaw) @ far_end  # on the floor (height 0) under the rail's end

@@ -101,3 +101,15 @@ def test_round_off_agrees_and_a_real_change_does_not() -> None:
     assert agrees(timed, later, clock=True) and not agrees(timed, later)
     assert not agrees(timed, later.replace("59", "58"), clock=True)
     assert not agrees("speed 3.5 s\n", "speed 4.5 s\n", clock=True)  # only after "in "
+
+
+
+def test_the_block_markers_read_alone_and_together(tmp_path: Path) -> None:
+    """Review 56: '<!-- round-off: 5%; clock -->' lost its clock (' clock' after the split)."""
+    doc = tmp_path / "DOC.md"
+    fence = "```console\n$ camtraj --version\n```\n\n"
+    doc.write_text("".join(f"{m}\n{fence}" for m in (
+        "<!-- round-off: 5%; clock -->", "<!-- clock -->", "<!-- round-off: 2% -->", "")),
+        encoding="utf-8")
+    assert [(b.rtol, b.clock) for b in blocks(doc)] == [
+        (0.05, True), (0.01, True), (0.02, False), (0.01, False)]

@@ -29,10 +29,9 @@ Units: SI throughout (m, rad, s); error messages show revolute axes in degrees.
 """
 
 from camtraj.timing.limits import QUANTITIES, Limits, LimitViolation, TimingLimitError
-from camtraj.timing.take import MODES, Take, TimingReport, feasible_speed, time_shot
+from camtraj.timing.take import Take, TimingReport, feasible_speed, time_shot
 
 __all__ = [
-    "MODES",
     "QUANTITIES",
     "LimitViolation",
     "Limits",

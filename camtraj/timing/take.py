@@ -50,7 +50,6 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-MODES: tuple[str, ...] = TIMING_MODES
 #: Film frame times may deviate from a uniform grid by this fraction of the frame interval.
 UNIFORM_RTOL = 1e-6
 #: ``"scale"`` slows a move by at most this factor; a move whose run-up or run-out still has
@@ -552,8 +551,8 @@ def _validate(
     if np.max(np.abs(steps - dt)) > UNIFORM_RTOL * dt:
         msg = "frame_times must be uniformly spaced (1/fps apart)"
         raise ValueError(msg)
-    if mode not in MODES:
-        msg = f"timing mode {mode!r} is not one of {', '.join(MODES)}"
+    if mode not in TIMING_MODES:
+        msg = f"timing mode {mode!r} is not one of {', '.join(TIMING_MODES)}"
         raise ValueError(msg)
     if not (math.isfinite(rate) and rate > 0):
         msg = f"servo rate must be a positive number [Hz], got {rate}"
