@@ -169,8 +169,9 @@ def placement_notes(options: ConvertOptions, placement: Placement, robot: Robot,
         keep_out = [polygon(k, f"floor.keep_out[{i}]") for i, k in enumerate(sf.keep_out)]
     except InputError as exc:
         return (f"the rail's footprint was not checked against the floor: {exc}",)
-    R, (x, y, _z) = placement.base2world[:3, :3], placement.base2world[:3, 3]
-    at = (np.array([x]), np.array([y]), np.array([math.degrees(math.atan2(R[1, 0], R[0, 0]))]))
+    where_is = placement.describe()
+    (x, y, _z), yaw = where_is["translation_m"], where_is["yaw_deg"]
+    at = (np.array([x]), np.array([y]), np.array([yaw]))
     notes = []
     if region is not None and not floor_ok(robot, *at, region, [])[0]:
         notes.append(f"the rail at this placement is not wholly inside the floor region of "

@@ -17,7 +17,7 @@ import json
 import os
 import stat
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -214,23 +214,15 @@ def _blocking_layer(root: str, mtime_ns: int) -> tuple[str, str, str] | None:
     """The first file under ``root``'s layers that would block a reader: (path, the layer
     naming it, what it is); None when there is none (``mtime_ns`` keys the cache)."""
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
-        from pxr import Ar, Sdf, Tf
+        from pxr import Ar, Sdf
 
     resolver = Ar.GetResolver()
-    trap_type = getattr(Tf, "DiagnosticTrap", None)
     seen = {root}
     todo = [root]
     while todo:
         path = todo.pop()
-        trap: Any = trap_type() if trap_type is not None else contextlib.nullcontext()
-        try:
-            with trap as caught:
-                layer = Sdf.Layer.FindOrOpen(path)
-                if caught is not None:
-                    caught.Clear()
-        except Exception:  # USD's own errors: the reader reports them
-            continue
-        if layer is None:
+        layer = _quietly(functools.partial(Sdf.Layer.FindOrOpen, path))
+        if layer is None:  # USD could not open it: the reader reports it
             continue
         composed = set(layer.GetCompositionAssetDependencies())
         for asset in [*composed, *layer.GetExternalAssetDependencies()]:
@@ -252,6 +244,23 @@ def _blocking_layer(root: str, mtime_ns: int) -> tuple[str, str, str] | None:
     return None
 
 
+def _quietly(action: Callable[[], Any]) -> Any:
+    """``action()`` with USD's diagnostics kept off stderr; None where USD raised (the reader
+    reports what it could not open)."""
+    from pxr import Tf
+
+    trap_type = getattr(Tf, "DiagnosticTrap", None)  # new in OpenUSD 25.x
+    trap: Any = trap_type() if trap_type is not None else contextlib.nullcontext()
+    try:
+        with trap as caught:
+            result = action()
+            if caught is not None:
+                caught.Clear()
+    except Exception:  # USD raises Tf.ErrorException and others
+        return None
+    return result
+
+
 def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
     """Every file the USD shot pulls in: sublayers, references, payloads, clips (not itself).
 
@@ -265,18 +274,13 @@ def shot_layers(shot: str | os.PathLike[str]) -> list[Path]:
     except ShotFileError:
         return []
     with interrupts.deferred():  # USD's module loader swallows a KeyboardInterrupt
-        from pxr import Sdf, Tf, UsdUtils  # (UsdUtils loads UsdShade and Sdr: ~0.1 s)
+        from pxr import Sdf, UsdUtils  # (UsdUtils loads UsdShade and Sdr: ~0.1 s)
 
     root = os.path.realpath(shot)
-    trap_type = getattr(Tf, "DiagnosticTrap", None)
-    trap: Any = trap_type() if trap_type is not None else contextlib.nullcontext()
-    try:
-        with trap as caught:
-            layers, assets, _ = UsdUtils.ComputeAllDependencies(Sdf.AssetPath(root))
-            if caught is not None:
-                caught.Clear()
-    except Exception:  # USD raises Tf.ErrorException and others; reading reports it
+    deps = _quietly(lambda: UsdUtils.ComputeAllDependencies(Sdf.AssetPath(root)))
+    if deps is None:  # USD could not open it: reading reports it
         return []
+    layers, assets, _ = deps
     found = [str(layer.realPath) for layer in layers] + [str(a) for a in assets]
     return [Path(p) for p in dict.fromkeys(found) if p and os.path.realpath(p) != root]
 

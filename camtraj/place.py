@@ -85,6 +85,14 @@ def _solve(robot: Robot, flange2base: Array, problem: Problem, frame_interval: f
 # ---------------------------------------------------------------------------------------------
 
 
+def base_height(floor_z: float) -> float:
+    """The robot base's height [m] with its rail lying on a floor at ``floor_z`` [m]: on the
+    carriage, :data:`~camtraj.urdf.RAIL_HEIGHT` up."""
+    from camtraj.urdf import RAIL_HEIGHT
+
+    return floor_z + RAIL_HEIGHT
+
+
 @dataclass(frozen=True)
 class Problem:
     """Everything a worker needs, as plain picklable data (converted world: metres, Z-up)."""
@@ -108,9 +116,7 @@ class Problem:
     @property
     def base_z(self) -> float:
         """The base's height [m]: on the carriage, on the rail lying on the floor."""
-        from camtraj.urdf import RAIL_HEIGHT
-
-        return self.floor_z + RAIL_HEIGHT
+        return base_height(self.floor_z)
 
 
 @dataclass(frozen=True)
@@ -380,8 +386,7 @@ class PlaceReport:
     """What ``camtraj place`` found: the ranked placements solved on every frame."""
 
     shot: str
-    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it (Problem.base_z)
-    base_z: float
+    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it (:attr:`base_z`)
     results: list[Result]
     evaluated: int
     screened: int
@@ -392,6 +397,11 @@ class PlaceReport:
     @property
     def best(self) -> Result:
         return self.results[0]
+
+    @property
+    def base_z(self) -> float:
+        """The base's height [m]: on the carriage, on the rail lying on the floor."""
+        return base_height(self.floor_z)
 
     def to_json(self) -> dict[str, Any]:
         return {"shot": self.shot, "status": "ok" if self.best.ok else "infeasible",
@@ -767,8 +777,7 @@ def place(
         raise
     finally:
         runner.close()
-    return PlaceReport(str(shot_path), problem.floor_z, problem.base_z,
-                       [lay.results[0] for lay in layouts],
+    return PlaceReport(str(shot_path), problem.floor_z, [lay.results[0] for lay in layouts],
                        runner.count, screened, time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
 

@@ -46,6 +46,7 @@ from camtraj.place import (
     Problem,
     _race,
     _Runner,
+    base_height,
     columns,
     heights,
     load_problem,
@@ -168,8 +169,7 @@ class SceneReport:
 
     name: str
     shots: tuple[SceneShot, ...]
-    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it
-    base_z: float
+    floor_z: float  # [m]; the base stands RAIL_HEIGHT above it (:attr:`base_z`)
     layout: Layout | None
     reason: str
     split: list[tuple[tuple[int, ...], Layout]] | None
@@ -182,6 +182,11 @@ class SceneReport:
     @property
     def ok(self) -> bool:
         return self.layout is not None and self.layout.ok
+
+    @property
+    def base_z(self) -> float:
+        """The base's height [m]: on the carriage, on the rail lying on the floor."""
+        return base_height(self.floor_z)
 
     def to_json(self) -> dict[str, Any]:
         return {"layout": self.name, "status": "ok" if self.ok else "split",
@@ -295,8 +300,7 @@ def place_scene(
         raise
     finally:
         runner.close()
-    return SceneReport(name, tuple(shots), problems[0].floor_z, problems[0].base_z, layout,
-                       reason, split,
+    return SceneReport(name, tuple(shots), problems[0].floor_z, layout, reason, split,
                        runner.count, screened[0], time.perf_counter() - start,
                        with_clearance(sf, clearance), region)
 

@@ -350,7 +350,7 @@ def test_limits_column_is_use_like_every_other_percentage(robot: Robot) -> None:
 
     low, high = result(0.4), result(0.9)
     assert low.key() > high.key()  # less of the range used ranks higher
-    text = table(PlaceReport("shot.usda", 0.0, 0.18, [low, high], 2, 10, 1.0, SetFile(), {}))
+    text = table(PlaceReport("shot.usda", 0.0, [low, high], 2, 10, 1.0, SetFile(), {}))
     lines = text.splitlines()
     header, rows = lines[1], [ln for ln in lines if ln.lstrip().startswith(("1 ", "2 "))]
     assert "limits use" in header and "100% touching a limit" in text
