@@ -117,20 +117,23 @@ def read_shared_inputs(options: ConvertOptions) -> None:
         if path is not None:
             require_regular_file(path, what, error)
     load_robot(options)
-    if options.set_file is not None:
-        SetFile.read(options.set_file)
+    load_set_file(options)
 
 
-def load_placement(options: ConvertOptions) -> Placement:
-    """The robot base's placement: ``--placement``, else the set file's, else the stage
-    origin. ``--placement`` over a set file's placement says which one it replaces
-    (:attr:`Placement.overrides`, a warning of the run)."""
+def load_set_file(options: ConvertOptions) -> SetFile | None:
+    """``--set-file``, read once for the run (placement, its warnings, the collision check)."""
+    return SetFile.read(options.set_file) if options.set_file is not None else None
+
+
+def load_placement(options: ConvertOptions, sf: SetFile | None) -> Placement:
+    """The robot base's placement: ``--placement``, else the set file's (``sf``, read from
+    ``options.set_file``), else the stage origin. ``--placement`` over a set file's
+    placement says which one it replaces (:attr:`Placement.overrides`, a warning of the
+    run)."""
     from_file = None
-    if options.set_file is not None:
-        sf = SetFile.read(options.set_file)
-        if sf.base2world is not None:
-            layout = "" if sf.layout is None else f", layout {sf.layout}"
-            from_file = Placement(sf.base2world, f"{options.set_file}{layout}")
+    if sf is not None and sf.base2world is not None:
+        layout = "" if sf.layout is None else f", layout {sf.layout}"
+        from_file = Placement(sf.base2world, f"{options.set_file}{layout}")
     if options.placement is not None:
         x, y, z, yaw = options.placement
         given = Placement.from_xyz_yaw(x, y, z, yaw)
@@ -142,15 +145,15 @@ def load_placement(options: ConvertOptions) -> Placement:
     return from_file or Placement()
 
 
-def placement_notes(options: ConvertOptions, placement: Placement, robot: Robot,
-                    shot: Shot) -> tuple[str, ...]:
+def placement_notes(options: ConvertOptions, sf: SetFile | None, placement: Placement,
+                    robot: Robot, shot: Shot) -> tuple[str, ...]:
     """Warnings about where the robot stands, against the set file: it has no placement of
     its own (the robot at the stage origin, where a wrong file given by mistake puts it), or
     the rail at the placement leaves its floor region or crosses a keep-out (checked as
-    ``place`` checks its candidates: the rail's footprint)."""
-    if options.set_file is None:
+    ``place`` checks its candidates: the rail's footprint). ``sf``: the set file read from
+    ``options.set_file``."""
+    if sf is None or options.set_file is None:
         return ()
-    sf = SetFile.read(options.set_file)
     where = one_line(options.set_file)
     if sf.base2world is None and options.placement is None:
         return (f"the set file {where} has no [placement]: the robot base stands at the "
@@ -310,15 +313,17 @@ def analyse(
         robot = load_robot(options)
         start = (None if options.start_from is None
                  else robot.joint_vector(options.start_from, "--start-from"))
-        placement = load_placement(options)
+        set_file = load_set_file(options)
+        placement = load_placement(options, set_file)
         shot = load_shot(shot_path, options)
-        placement = replace(placement, notes=placement_notes(options, placement, robot, shot))
+        placement = replace(placement,
+                            notes=placement_notes(options, set_file, placement, robot, shot))
         targets = np.linalg.inv(placement.base2world) @ shot.cam2world
     analysis = Analysis(shot, robot, placement, targets, timings=timings)
     if on_start is not None:
         on_start(analysis)
     try:
-        _solve_and_time(analysis, shot_path, options, start, progress)
+        _solve_and_time(analysis, shot_path, options, set_file, start, progress)
     except InfeasibleError as exc:  # what reading the shot warned of is often why
         exc.shot_warnings = tuple(shot.warnings)
         raise
@@ -326,8 +331,9 @@ def analyse(
 
 
 def _solve_and_time(analysis: Analysis, shot_path: str | Path, options: ConvertOptions,
-                    start: Array | None, progress: Progress) -> None:
-    """:func:`analyse`'s IK, timing and collision stages, filling in ``analysis``."""
+                    set_file: SetFile | None, start: Array | None, progress: Progress) -> None:
+    """:func:`analyse`'s IK, timing and collision stages, filling in ``analysis``
+    (``set_file``: the one ``options.set_file`` names, read)."""
     shot, robot, targets, timings = (analysis.shot, analysis.robot, analysis.targets,
                                      analysis.timings)
     if robot.lens is not None:  # a frame beyond the lens's calibration is an error up front
@@ -366,7 +372,6 @@ def _solve_and_time(analysis: Analysis, shot_path: str | Path, options: ConvertO
             if held and not cuts:
                 exc.add_note(held)
             raise
-    set_file = SetFile.read(options.set_file) if options.set_file is not None else None
     if set_file is not None and set_file.prims:
         from camtraj.collision import NEAR, check_take
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from camtraj.convert import load_placement
+from camtraj.convert import load_placement, load_set_file
 from camtraj.errors import InputError
 from camtraj.options import ConvertOptions
 from camtraj.set_file import SetFile, floor_xy, to_toml
@@ -98,15 +98,16 @@ def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> No
     assert back.prims == sf.prims and back.clearance_m == sf.clearance_m
     assert back.region is not None and sf.region is not None
     assert np.array_equal(back.region, sf.region) and back.yaw_range_deg == sf.yaw_range_deg
-    placement = load_placement(ConvertOptions(set_file=str(path)))
+    options = ConvertOptions(set_file=str(path))
+    placement = load_placement(options, load_set_file(options))
     assert np.allclose(placement.base2world, T)
 
 
 def test_file_without_placement_places_at_the_origin(tmp_path: Path) -> None:
     path = tmp_path / "set.toml"
     path.write_text("[collision]\nprims = [\"/World/wall\"]\n")
-    assert np.array_equal(load_placement(ConvertOptions(set_file=str(path))).base2world,
-                          np.eye(4))
+    options = ConvertOptions(set_file=str(path))
+    assert np.array_equal(load_placement(options, load_set_file(options)).base2world, np.eye(4))
 
 
 def test_floor_points_convert_like_the_camera() -> None:
@@ -124,12 +125,16 @@ def test_a_set_file_with_no_placement_or_a_rail_off_its_floor_is_warned_of(
     placement whose rail crossed the file's keep-out or left its floor region was taken as
     it was. The push-in is a Y-up cm stage: floor points are [x, 0, z] in cm."""
     from camtraj.analysis import Placement
-    from camtraj.convert import placement_notes
+    from camtraj.convert import placement_notes as notes_of
     from camtraj.robot import Robot
     from camtraj.usd_shot import read_shot
 
     robot = Robot.default()
     shot = read_shot(Path(__file__).parent.parent / "samples" / "shots" / "maya_dolly_push_in.usda")
+
+    def placement_notes(options: ConvertOptions, placement: Placement, robot: Robot,
+                        shot: object) -> tuple[str, ...]:  # the set file read as convert reads it
+        return notes_of(options, load_set_file(options), placement, robot, shot)
     bare = tmp_path / "bare.toml"
     bare.write_text("[floor]\nheight = 0.0\n", encoding="utf-8")
     (note,) = placement_notes(ConvertOptions(set_file=str(bare)), Placement(), robot, shot)
@@ -180,3 +185,25 @@ def test_a_placement_on_the_command_line_has_a_set_files_bounds() -> None:
         with pytest.raises(InputError, match=r"placement must be x, y, z within ±1e6 m"):
             ConvertOptions(placement=bad)
     assert ConvertOptions(placement=(1e6, -1e6, 0.0, -360.0)).placement is not None
+
+
+def test_a_run_reads_its_set_file_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The placement, its warnings and the collision check all come from one read of the
+    set file (it was read three times a run: a file rewritten by ``place -o`` during a run
+    could give the take one placement and its warnings another)."""
+    from camtraj.convert import analyse
+
+    path = tmp_path / "set.toml"
+    path.write_text("[placement]\nx = 0.05\ny = 0.0\nz = 0.0\nyaw_deg = 1.5\n", encoding="utf-8")
+    reads: list[str] = []
+    real = SetFile.read.__func__  # type: ignore[attr-defined]
+
+    def counted(cls: type[SetFile], p: str | Path) -> SetFile:
+        reads.append(str(p))
+        return real(cls, p)  # type: ignore[no-any-return]
+
+    monkeypatch.setattr(SetFile, "read", classmethod(counted))
+    shot = Path(__file__).parent.parent / "samples" / "shots" / "maya_dolly_push_in.usda"
+    analysis = analyse(shot, ConvertOptions(set_file=str(path), timing="scale"))
+    assert reads == [str(path)]
+    assert analysis.placement.base2world[0, 3] == pytest.approx(0.05)
