@@ -45,7 +45,7 @@ from camtraj.inputs import one_line
 from camtraj.options import timing_edges
 from camtraj.reach import check_can_reach, floor_ok, reach_envelope, reach_slack
 from camtraj.robot import JOINT_NAMES, Robot
-from camtraj.set_file import SetFile, floor_polygon, yaw_pose
+from camtraj.set_file import SetFile, floor_polygon, with_clearance_text, yaw_pose
 from camtraj.shown import MAX_SHOWN_SPEED, speed_percent
 from camtraj.timing import TimingLimitError, time_shot
 
@@ -725,9 +725,7 @@ def with_clearance(sf: SetFile, clearance: float | None) -> SetFile:
     """The set file as the placed one is written: a --clearance given replaces its own."""
     if clearance is None:
         return sf
-    raw = dict(sf.raw)
-    raw["collision"] = {**raw.get("collision", {}), "clearance_m": clearance}
-    return replace(sf, raw=raw)
+    return replace(sf, text=with_clearance_text(sf.text, clearance))
 
 
 def place(

@@ -132,7 +132,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                        f"{slower}", err=True)
             ctx.exit(3)
         if output is not None:
-            text = to_toml(best.x, best.y, report.base_z, best.yaw_deg, report.set_file.raw)
+            text = to_toml(best.x, best.y, report.base_z, best.yaw_deg, report.set_file.text)
             _write(ctx, outputs, output, text, as_json)
 
 
@@ -171,6 +171,6 @@ def _place_scene(ctx: click.Context, outputs: Any, members: list[Any], name: str
         ctx.exit(3)
     if output is not None:
         lay = report.layout
-        text = to_toml(lay.x, lay.y, report.base_z, lay.yaw_deg, report.set_file.raw,
+        text = to_toml(lay.x, lay.y, report.base_z, lay.yaw_deg, report.set_file.text,
                        layout=name)
         _write(ctx, outputs, output, text, as_json)

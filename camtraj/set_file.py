@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomlkit
 from numpy.typing import NDArray
 
 from camtraj.errors import InputError
@@ -66,6 +67,8 @@ class SetFile:
         prims: Prim paths or glob patterns of obstacles on the shot's stage.
         clearance_m: Required distance between the robot and the obstacles [m].
         layout: The name of the layout the placement was found for (a scene's), or None.
+        text: The file's own text ("" for none): ``place -o`` writes it back with the new
+            placement, its comments and layout kept (:func:`to_toml`).
     """
 
     source: str = "<none>"
@@ -77,7 +80,7 @@ class SetFile:
     prims: tuple[str, ...] = ()
     clearance_m: float = 0.0
     layout: str | None = None
-    raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    text: str = field(default="", repr=False, compare=False)
 
     @classmethod
     def read(cls, path: str | Path) -> SetFile:
@@ -142,7 +145,7 @@ class SetFile:
             prims=tuple(prims),
             clearance_m=clearance,
             layout=_layout(tables["placement"], where),
-            raw=data,
+            text=text,
         )
 
 
@@ -195,35 +198,42 @@ def yaw_pose(x: float, y: float, z: float, yaw_deg: float) -> Array:
     return T
 
 
-def to_toml(x: float, y: float, z: float, yaw_deg: float, raw: dict[str, Any],
+def to_toml(x: float, y: float, z: float, yaw_deg: float, text: str = "",
             layout: str | None = None) -> str:
-    """A set file: ``raw``'s tables as they were, with ``[placement]`` at x, y, z [m] and
-    yaw_deg, written as those very numbers (read back, :func:`yaw_pose` gives the transform
-    bit for bit: a yaw recovered from the matrix, -136.88000000000002, gave another, and a
-    shot's speed can change with the last bit), and the layout's name when given."""
-    lines = ["# camtraj set file (written by camtraj place)", "",
-             "[placement]  # robot base in the converted world: metres, Z-up",
-             f"x = {float(x)!r}", f"y = {float(y)!r}", f"z = {float(z)!r}",
-             f"yaw_deg = {float(yaw_deg)!r}"]
+    """A set file: ``text`` (a set file's own, "" for none) with its ``[placement]`` at x, y,
+    z [m] and yaw_deg, and the layout's name when given; every other line, comments
+    included, as it was (tomlkit edits the document in place). The numbers are written as
+    they are (read back, :func:`yaw_pose` gives the transform bit for bit: a yaw recovered
+    from the matrix, -136.88000000000002, gave another, and a shot's speed can change with
+    the last bit)."""
+    doc = tomlkit.parse(text) if text.strip() else _new_document()
+    table = doc.get("placement")
+    if table is None:
+        table = tomlkit.table()
+        table.comment("robot base in the converted world: metres, Z-up (camtraj place)")
+        doc.add("placement", table)
+    for key in ("x", "y", "z", "yaw_deg", "rotation", "layout"):
+        table.pop(key, None)
+    table.update({"x": float(x), "y": float(y), "z": float(z), "yaw_deg": float(yaw_deg)})
     if layout is not None:
-        lines.append(f"layout = {_toml_value(layout)}")
-    for name in ("floor", "search", "collision"):
-        table = raw.get(name)
-        if not table:
-            continue
-        lines += ["", f"[{name}]"]
-        lines += [f"{key} = {_toml_value(value)}" for key, value in table.items()]
-    return "\n".join(lines) + "\n"
+        table["layout"] = layout
+    return doc.as_string()
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value)
+def with_clearance_text(text: str, clearance_m: float) -> str:
+    """A set file's ``text`` with ``[collision] clearance_m`` set, every other line kept."""
+    doc = tomlkit.parse(text) if text.strip() else _new_document()
+    if "collision" not in doc:
+        doc.add("collision", tomlkit.table())
+    doc["collision"]["clearance_m"] = float(clearance_m)  # type: ignore[index]
+    return doc.as_string()
+
+
+def _new_document() -> tomlkit.TOMLDocument:
+    doc = tomlkit.document()
+    doc.add(tomlkit.comment("camtraj set file (written by camtraj place)"))
+    doc.add(tomlkit.nl())
+    return doc
 
 
 def _number(value: Any, where: str, key: str, lo: float, hi: float) -> float:

@@ -243,7 +243,7 @@ def test_the_layout_name_round_trips_through_the_set_file() -> None:
     from camtraj.errors import InputError
     from camtraj.set_file import SetFile, to_toml
 
-    text = to_toml(1.0, 2.0, 0.0, 30.0, {"search": {"yaw_deg": 30.0}},
+    text = to_toml(1.0, 2.0, 0.0, 30.0, "[search]\nyaw_deg = 30.0\n",
                    layout='sc "12" \\ day 2')
     assert tomllib.loads(text)["placement"]["layout"] == 'sc "12" \\ day 2'
     sf = SetFile.parse(text)

@@ -89,7 +89,7 @@ def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> No
     T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
     T[:3, 3] = (-40.1, 56.3, 0.1)
     path = tmp_path / "placed.toml"
-    path.write_text(to_toml(-40.1, 56.3, 0.1, -136.88, sf.raw))
+    path.write_text(to_toml(-40.1, 56.3, 0.1, -136.88, sf.text))
     data = tomllib.loads(path.read_text())  # plain TOML, as a person reads it
     assert data["placement"]["yaw_deg"] == -136.88  # the number, not one recovered from a matrix
     back = SetFile.read(path)
@@ -101,6 +101,34 @@ def test_written_file_reads_back_and_keeps_the_constraints(tmp_path: Path) -> No
     options = ConvertOptions(set_file=str(path))
     placement = load_placement(options, load_set_file(options))
     assert np.allclose(placement.base2world, T)
+
+
+def test_place_keeps_the_set_files_comments_and_replaces_only_its_placement() -> None:
+    """A set file's notes (which flight case a keep-out is, who measured the floor) survive
+    ``place -o``: only [placement] changes (it was written anew from the parsed tables, every
+    comment lost). A placement given as a rotation becomes x, y, z and yaw_deg; a file
+    without one gets one; an old layout name goes unless a scene's place gives one."""
+    text = ("# stage 4, measured 2026-11-30 by rigging\n"
+            "[placement]  # last week's\nx = 1.0\ny = 2.0\nz = 0.18\n"
+            "rotation = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nlayout = \"old\"\n\n"
+            "[floor]\nheight = 0.0\n# the flight cases by the door\n"
+            "keep_out = [[[500, 0, 500], [700, 0, 500], [700, 0, 700]]]  # case 3\n")
+    out = to_toml(-3.5, 4.25, 0.18, 12.5, text)
+    for kept in ("# stage 4, measured 2026-11-30 by rigging\n", "# the flight cases by the door\n",
+                 "  # case 3\n", "[placement]  # last week's\n"):
+        assert kept in out
+    data = tomllib.loads(out)
+    assert data["placement"] == {"x": -3.5, "y": 4.25, "z": 0.18, "yaw_deg": 12.5}
+    assert data["floor"] == tomllib.loads(text)["floor"]
+    sf = SetFile.parse(out)
+    assert sf.base2world is not None and np.allclose(sf.base2world[:3, 3], (-3.5, 4.25, 0.18))
+    bare = to_toml(1.0, 2.0, 0.18, 30.0, "# my set\n[collision]\nclearance_m = 0.1\n",
+                   layout="sc 12")
+    assert bare.startswith("# my set\n")
+    assert tomllib.loads(bare) == {"collision": {"clearance_m": 0.1}, "placement": {
+        "x": 1.0, "y": 2.0, "z": 0.18, "yaw_deg": 30.0, "layout": "sc 12"}}
+    fresh = to_toml(1.0, 2.0, 0.18, 30.0)
+    assert fresh.startswith("# camtraj set file") and SetFile.parse(fresh).base2world is not None
 
 
 def test_file_without_placement_places_at_the_origin(tmp_path: Path) -> None:
