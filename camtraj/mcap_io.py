@@ -480,10 +480,8 @@ def _encode_string(text: str) -> bytes:
 
 
 def quat_from_matrix(R: ArrayLike) -> Array:
-    """Unit quaternions ``(x, y, z, w)`` of rotation matrices (Shepperd's method).
-
-    Picks the best-conditioned of the four formulas (largest of the trace and the diagonal),
-    normalises, and makes ``w >= 0`` (for ``w == 0`` the first non-zero of x, y, z positive).
+    """Unit quaternions ``(x, y, z, w)`` of rotation matrices (scipy's ``Rotation``), in the
+    canonical form: ``w >= 0`` (for ``w == 0`` the first non-zero of x, y, z positive).
 
     Args:
         R: Rotations, shape (..., 3, 3), or transforms (..., 4, 4) (rotation part used).
@@ -491,56 +489,30 @@ def quat_from_matrix(R: ArrayLike) -> Array:
     Returns:
         Quaternions, shape (..., 4), scalar last (ROS order).
     """
+    from scipy.spatial.transform import Rotation  # here: 0.24 s that info need not import
+
     M = np.asarray(R, dtype=float)[..., :3, :3]
-    m00, m01, m02 = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
-    m10, m11, m12 = M[..., 1, 0], M[..., 1, 1], M[..., 1, 2]
-    m20, m21, m22 = M[..., 2, 0], M[..., 2, 1], M[..., 2, 2]
-    trace = m00 + m11 + m22
-    choice = np.argmax(np.stack([trace, m00, m11, m22], axis=-1), axis=-1)
-    # 4 * (the component picked) squared, for each choice; at least 1 where picked.
-    big = np.stack(
-        [1.0 + trace, 1.0 + m00 - m11 - m22, 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22],
-        axis=-1,
-    )
-    s = np.sqrt(np.maximum(np.take_along_axis(big, choice[..., None], axis=-1)[..., 0], 1e-300))
-    # Unnormalised candidates (scaled by 4 * component), one row per choice: (x, y, z, w).
-    cands = np.stack(
-        [
-            np.stack([m21 - m12, m02 - m20, m10 - m01, big[..., 0]], axis=-1),
-            np.stack([big[..., 1], m01 + m10, m02 + m20, m21 - m12], axis=-1),
-            np.stack([m01 + m10, big[..., 2], m12 + m21, m02 - m20], axis=-1),
-            np.stack([m02 + m20, m12 + m21, big[..., 3], m10 - m01], axis=-1),
-        ],
-        axis=-2,
-    )
-    quat = np.take_along_axis(cands, choice[..., None, None], axis=-2)[..., 0, :] / (2.0 * s)[
-        ..., None
-    ]
-    quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
-    w = quat[..., 3]
-    flip = w < 0
-    zero_w = w == 0
-    if np.any(zero_w):
-        xyz = quat[..., :3]
-        first = np.take_along_axis(xyz, np.argmax(xyz != 0, axis=-1)[..., None], axis=-1)[..., 0]
-        flip = flip | (zero_w & (first < 0))
-    out: Array = np.where(flip[..., None], -quat, quat) + 0.0  # + 0.0: no negative zeros
+    flat = M.reshape(-1, 3, 3)
+    quat = (Rotation.from_matrix(flat).as_quat(canonical=True) if flat.shape[0]
+            else np.zeros((0, 4)))
+    out: Array = quat.reshape(*M.shape[:-2], 4) + 0.0  # + 0.0: no negative zeros
     return out
 
 
 def matrix_from_quat(quat: ArrayLike) -> Array:
-    """Rotation matrices of quaternions ``(x, y, z, w)`` (normalised first), shape (..., 3, 3)."""
+    """Rotation matrices of quaternions ``(x, y, z, w)`` (normalised first), shape (..., 3, 3);
+    NaN for a quaternion of no length or not finite (a damaged file's: said where it is
+    read, not raised here)."""
+    from scipy.spatial.transform import Rotation
+
     qa = np.asarray(quat, dtype=float)
-    qa = qa / np.linalg.norm(qa, axis=-1, keepdims=True)
-    x, y, z, w = qa[..., 0], qa[..., 1], qa[..., 2], qa[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=-2,
-    )
+    flat = qa.reshape(-1, 4)
+    norm = np.linalg.norm(flat, axis=1)
+    ok = np.isfinite(norm) & (norm > 0.0)
+    out = np.full((flat.shape[0], 3, 3), np.nan)
+    if ok.any():
+        out[ok] = Rotation.from_quat(flat[ok]).as_matrix()
+    return out.reshape(*qa.shape[:-1], 3, 3)
 
 
 def pose7_from_matrix(T: ArrayLike) -> Array:

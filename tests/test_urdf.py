@@ -19,7 +19,6 @@ from camtraj.urdf import (
     Transform,
     axis_frame,
     link_transforms,
-    matrix_from_rpy,
     robot_urdf,
     rpy_from_matrix,
     static_transforms,
@@ -27,6 +26,14 @@ from camtraj.urdf import (
 
 Array = NDArray[np.float64]
 
+
+
+def matrix_from_rpy(roll: float, pitch: float, yaw: float) -> Array:
+    """URDF's rpy: ``Rz(yaw) Ry(pitch) Rx(roll)`` (checked against rot_z, rot_y, rot_x below)."""
+    from scipy.spatial.transform import Rotation
+
+    out: Array = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    return out
 
 def _floats(text: str) -> Array:
     return np.array([float(v) for v in text.split()])
