@@ -573,3 +573,53 @@ def test_a_robot_set_up_on_the_first_frame_keeps_that_solution(robot: Robot) -> 
     speeds = [max_speed(robot, p.q, fps, targets, p.rest_axes()) for p in (default, placed)]
     assert speeds[1] >= (1.0 - NEAR_START) * speeds[0], speeds
     assert pose_error(robot.fk(placed.q), targets)[0] < 1e-9
+
+
+def _out_and_back(robot: Robot, n: int, shift: float = 0.0, twos: bool = False) -> Any:
+    """Camera poses (n, 4, 4) in the base frame of a push 0.4 m out and back with a pan, its
+    turning point at frame (n - 1) / 2 + ``shift``: with an even n and no shift half-way
+    between two frames, which are then equal bit for bit. ``twos``: each pose held for two
+    frames (a move animated on twos)."""
+    from .conftest import rot_z
+
+    i = np.arange(n, dtype=float)
+    if twos:
+        i = 2.0 * np.floor(i / 2.0)
+    c = (n - 1) / 2.0 + shift
+    s = 1.0 - ((i - c) / c) ** 2
+    look = robot.camera_pose(np.zeros(8))[:3, :3]
+    out = np.tile(np.eye(4), (n, 1, 1))
+    for k in range(n):
+        out[k, :3, :3] = rot_z(0.25 * s[k]) @ look
+        out[k, :3, 3] = (4.3 + 0.4 * s[k], 0.1 * s[k], 0.9)
+    return out
+
+
+def test_a_turnaround_between_two_frames_is_no_hold(robot: Robot) -> None:
+    """Issue 13 (a turning point is no hold), trial 23: a move symmetric about a turning
+    point half-way between two frames has those two camera poses equal. Taken as a hold, the
+    robot stopped dead there (an out-and-back push at 66% of real time, the same move turning
+    on a frame at 381%). The take fits at the speed of the same move with its turning point
+    moved a hundredth of a frame (within 2%), and the robot moves between the two frames. A
+    move on twos keeps its holds (the camera goes on the way it went)."""
+    from camtraj.ik import camera_holds
+
+    cam = _out_and_back(robot, 48)
+    assert np.array_equal(cam[23], cam[24])
+    assert not camera_holds(cam).any()
+    twos = camera_holds(_out_and_back(robot, 48, twos=True))
+    # every other pair held, but for the one the camera turns back across
+    assert np.flatnonzero(twos).tolist() == [k for k in range(0, 47, 2) if k != 24]
+    # a hold of two pairs at the turning point, and an equal pair at either end, stay holds
+    long_hold = np.concatenate([cam[:24], cam[23:24], cam[24:]])
+    assert camera_holds(long_hold)[[22, 23, 24]].tolist() == [False, True, True]
+    ends = np.concatenate([cam[:1], cam, cam[-1:]])
+    held = camera_holds(ends)
+    assert held[0] and held[-1] and not held[1:-1].any()
+
+    speeds = []
+    for c in (cam, _out_and_back(robot, 48, shift=0.01)):
+        targets = c @ np.linalg.inv(robot.camera2flange)
+        path = solve_path_report(robot, targets, frame_interval=1 / 24, still_ends=True)
+        speeds.append(max_speed(robot, path.q, 24.0, targets, path.rest_axes()))
+    assert speeds[0] == pytest.approx(speeds[1], rel=0.02), speeds
