@@ -221,6 +221,8 @@ class ShotResult:
             made it).
         earlier_output: For a failed shot, its MCAP path when a file is there from an
             earlier run (the batch removes nothing), else None.
+        notes: For a failed shot, what ``convert`` says with its error (what to try, where a
+            hold or a jump is), each naming the shot.
     """
 
     shot: str
@@ -235,6 +237,7 @@ class ShotResult:
     summary: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     earlier_output: str | None = None
+    notes: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """This result as a JSON-able dict."""
@@ -253,6 +256,7 @@ class ShotResult:
             "seconds": round(self.seconds, 3),
             "cpu_seconds": round(self.cpu_seconds, 3),
             "earlier_output": self.earlier_output,
+            "notes": list(self.notes),
         }
 
 
@@ -414,6 +418,7 @@ def _convert_one(
             outcome["summary"] = {"max_speed": speed}
         if isinstance(exc, InfeasibleError):  # what reading the shot warned of is often why
             outcome["warnings"] = _named(shot, [*held.texts, *exc.shot_warnings])
+        outcome["notes"] = _named(shot, [f"note: {n}" for n in getattr(exc, "__notes__", [])])
     except Exception as exc:  # a bug: report it as this shot's failure and go on
         outcome = {
             "status": "failed",
@@ -526,6 +531,7 @@ def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any
         cpu_seconds=outcome.get("cpu_seconds", 0.0),
         summary=outcome.get("summary", {}),
         warnings=tuple(outcome.get("warnings", ())),
+        notes=tuple(outcome.get("notes", ())),
     )
 
 
@@ -675,7 +681,7 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
                     i = futures[future]
                     result = _result(shots[i], names[i], future)
                     results[i] = result
-                    for text in result.warnings:  # as convert says them, failed or not
+                    for text in (*result.notes, *result.warnings):  # as convert says them
                         bar.write(text, file=sys.stderr)
                     bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
                     bar.update(1)

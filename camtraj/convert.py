@@ -614,37 +614,54 @@ spline's jerk from a stop within one frame spreads over the two or three frames 
 
 def hold_note(held: NDArray[np.bool_], frames: NDArray[np.int_],
               violations: list[LimitViolation]) -> str | None:
-    """A note where the limits are exceeded next to a hold of the camera: the robot holds
+    """A note where the limits are exceeded next to holds of the camera: the robot holds
     still wherever the camera does, so an animation that runs into a hold still moving, or
     still accelerating (an ease whose last key is flat in speed but not in acceleration, as
     a smoothstep or a flat Bezier tangent), asks the robot to stop or start within one
-    frame interval. ``held``: the camera's held frame pairs (n - 1,); ``violations``: the
+    frame interval; a move animated on twos (each pose held for two frames) asks it at every
+    other frame. ``held``: the camera's held frame pairs (n - 1,); ``violations``: the
     timing stage's, their frames as film frame numbers."""
     n = held.size + 1
     starts = np.flatnonzero(held & ~np.concatenate([[False], held[:-1]]))  # first pairs
     ends = np.flatnonzero(held & ~np.concatenate([held[1:], [False]])) + 1  # last frames
     edges = [(int(frames[k]), "stops dead into") for k in starts if k > 0]
     edges += [(int(frames[k]), "starts out of") for k in ends if k < n - 1]
-    # every run of frames over a limit lies within HOLD_EDGE_FRAMES of an edge, and no
-    # velocity is over: a move too fast for an axis between two holds (a whip pan) is over
-    # along the whole move, or in speed
-    if any(v.quantity == "velocity" for v in violations):
+    # every frame over a limit lies within HOLD_EDGE_FRAMES of an edge, and no velocity is
+    # over: a move too fast for an axis between two holds (a whip pan) is over along the
+    # whole move, or in speed
+    if not edges or any(v.quantity == "velocity" for v in violations):
         return None
     runs = [r for v in violations if v.quantity in ("acceleration", "jerk") for r in v.frames]
+    at = np.array(sorted({f for f, _ in edges}))
 
-    def at_edge(run: tuple[int, int], f: int) -> bool:
-        return f - HOLD_EDGE_FRAMES <= run[0] and run[1] <= f + HOLD_EDGE_FRAMES
+    def covered(run: tuple[int, int]) -> bool:
+        f = np.arange(run[0], run[1] + 1)
+        i = np.searchsorted(at, f)
+        gap = np.minimum(np.abs(f - at[np.maximum(i - 1, 0)]),
+                         np.abs(f - at[np.minimum(i, at.size - 1)]))
+        return bool(np.all(gap <= HOLD_EDGE_FRAMES))
 
-    if not runs or not all(any(at_edge(r, f) for f, _ in edges) for r in runs):
+    if not runs or not all(covered(r) for r in runs):
         return None
-    near = sorted({(f, what) for f, what in edges if any(at_edge(r, f) for r in runs)})
+    near = sorted({(f, what) for f, what in edges
+                   if any(r[0] - HOLD_EDGE_FRAMES <= f <= r[1] + HOLD_EDGE_FRAMES for r in runs)})
     said = " and ".join(f"{what} a hold at frame {f}" for f, what in near[:4])
     more = f" (and {len(near) - 4} more)" if len(near) > 4 else ""
-    return (f"the limits are exceeded where the camera {said}{more}: the robot holds still "
+    note = (f"the limits are exceeded where the camera {said}{more}: the robot holds still "
             "where the camera does, so a move that reaches a hold still decelerating (or "
-            "leaves it at once) must stop (or start) within a frame; ease the animation into "
-            "and out of holds over more frames, or --timing optimal slows only the frames "
-            "around them")
+            "leaves it at once) must stop (or start) within a frame; ")
+    lone = int(np.count_nonzero(held[starts] & ~held[np.minimum(starts + 1, held.size - 1)]
+                                & (starts + 1 < held.size)))
+    if lone >= TWOS_HOLDS:
+        return note + (f"the camera holds a pose for just two frames {lone} times (a move "
+                       "animated on twos?): bake it on ones for a smooth move")
+    return note + ("ease the animation into and out of holds over more frames, or --timing "
+                   "optimal slows only the frames around them")
+
+
+TWOS_HOLDS = 4
+"""Holds of a single frame pair, at least this many, make a shot read as animated on twos
+(:func:`hold_note`)."""
 
 
 JUMP_OFF_PATH_M = 0.02

@@ -543,3 +543,28 @@ def test_a_report_path_batch_cannot_write_is_refused_before_any_shot(tmp_path: P
     assert proc.returncode == 2, proc.stderr
     assert "batch_report.json: it is a folder" in proc.stderr, proc.stderr
     assert sorted(p.name for p in out.iterdir()) == ["batch_report.json"]
+
+
+def test_a_failed_shot_keeps_converts_notes(tmp_path: Path) -> None:
+    """What convert says with its error (here: the camera holds every other frame, a move
+    on twos, so the robot stops dead at each) reaches batch's stderr and report (trial 23:
+    the report had the error alone)."""
+    import numpy as np
+
+    from camtraj.robot import Robot
+    from tests.shots import write_shot
+    from tests.test_shot import _out_and_back
+
+    robot = Robot.default()
+    shot = write_shot(tmp_path / "twos.usda", _out_and_back(robot, 48, twos=True))
+    alone = _run("convert", str(shot), "-o", str(tmp_path / "alone.mcap"), "-q")
+    assert alone.returncode == 3
+    (note,) = [line for line in alone.stderr.splitlines() if line.startswith("note: ")]
+    assert "a move animated on twos?" in note and "bake it on ones" in note
+    out = tmp_path / "out"
+    proc = _run("batch", str(shot), "-o", str(out), "--jobs", "1")
+    assert proc.returncode == 3
+    (entry,) = json.loads((out / REPORT_NAME).read_text())["shots"]
+    assert entry["notes"] == [f"{shot}: {note}"]
+    assert f"{shot}: {note}" in proc.stderr.splitlines()
+    assert np.isfinite(entry["max_speed"])
