@@ -551,6 +551,23 @@ def screen(problems: tuple[Problem, ...], shots: tuple[int, ...], set_file: SetF
                   info)
 
 
+def passing_screen(problems: tuple[Problem, ...], shots: tuple[int, ...], set_file: SetFile,
+                   *, meters_per_unit: float, up_axis: str) -> Screen:
+    """:func:`screen`, where some placement passes its cheap tests.
+
+    Raises:
+        PlacementError: None does (or :func:`screen`'s reasons), saying which tests.
+    """
+    scr = screen(problems, shots, set_file, meters_per_unit=meters_per_unit, up_axis=up_axis)
+    if not scr.ok.any():
+        msg = ("no placement in the search region keeps the whole camera path"
+               + (" of every shot" if len(shots) > 1 else "") + " within the robot's reach"
+               + (" with the rail inside the floor region and off the keep-out areas"
+                  if scr.region is not None or scr.keep_out else ""))
+        raise PlacementError(msg)
+    return scr
+
+
 def _slack(problems: tuple[Problem, ...], shots: tuple[int, ...], env: Any,
            places: Array) -> Array:
     """(N, S) reach slack of each placement (N, 3) for each shot: every shot's subsampled
@@ -580,14 +597,9 @@ def search(runner: _Runner, shots: tuple[int, ...], set_file: SetFile, *,
     problems = runner.problems
     robot = problems[shots[0]].robot
     env = reach_envelope(robot)
-    scr = screen(problems, shots, set_file, meters_per_unit=meters_per_unit, up_axis=up_axis)
+    scr = passing_screen(problems, shots, set_file, meters_per_unit=meters_per_unit,
+                         up_axis=up_axis)
     ok = scr.ok
-    if not ok.any():
-        msg = ("no placement in the search region keeps the whole camera path"
-               + (" of every shot" if len(shots) > 1 else "") + " within the robot's reach"
-               + (" with the rail inside the floor region and off the keep-out areas"
-                  if scr.region is not None or scr.keep_out else ""))
-        raise PlacementError(msg)
     cand, slack = scr.grid[ok], scr.slack[ok]
     order = np.argsort(-slack.min(axis=1), kind="stable")
     keep = min(COARSE_KEEP, max(8, len(cand) // 4))  # a small region needs fewer

@@ -423,3 +423,24 @@ def test_shots_of_one_stage_file_are_told_apart_by_camera_and_frames() -> None:
     assert SceneShot("stage.usda").name == "stage.usda"
     assert crane.to_json() == {"path": "stage.usda", "camera": "/World/cams/crane",
                                "frames": [1001, 1048], "timing": "scale"}
+
+
+def test_a_shot_no_placement_can_do_alone_fails_the_scene_before_any_search(
+        scene: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The far shot is out of the robot's reach from every base the set file's floor region
+    allows: the scene fails on it at once, naming it (exit 3), without the whole scene's
+    search and the split's (trial 21: 44 s to say what its own cheap tests say in a second)."""
+    import camtraj.scene as scene_module
+    from camtraj.errors import PlacementError
+    from camtraj.scene import SceneShot, place_scene
+
+    def no_search(*args: object, **kwargs: object) -> None:
+        raise AssertionError("searched")
+
+    monkeypatch.setattr(scene_module, "search", no_search)
+    shots = [SceneShot(str(scene["shots"][n])) for n in ("left", "far", "right")]
+    with pytest.raises(PlacementError) as caught:
+        place_scene(shots, name="t", set_file=str(scene["dir"] / "set.toml"), jobs=1)
+    assert str(caught.value).startswith(f"{scene['shots']['far']}: no placement can do it on "
+                                        "its own: ")
+    assert caught.value.exit_code == 3
