@@ -721,7 +721,7 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
         "input; 3 every failed shot was infeasible; 1 an unexpected error."
     ),
 )
-@click.argument("shots", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("shots", nargs=-1, required=True, type=click.Path())
 @click.option(
     "-o",
     "--outdir",

@@ -265,20 +265,20 @@ def main() -> None:
 
 
 @main.command()
-@click.argument("shot", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.argument("shot", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(),
               metavar="OUT.mcap", help="The MCAP file to write (atomically).")
 @convert_options
 @more_convert_options
-@click.option("--summary", type=click.Path(dir_okay=False), metavar="FILE.json",
+@click.option("--summary", type=click.Path(), metavar="FILE.json",
               help="Also write the run's summary as JSON.")
-@click.option("--usd", "rig_layer", type=click.Path(dir_okay=False), metavar="RIG.usda",
+@click.option("--usd", "rig_layer", type=click.Path(), metavar="RIG.usda",
               help="Also write a USD layer of the robot driving the move, to sublayer onto "
               "the shot.")
-@click.option("--foxglove-layout", "layout", type=click.Path(dir_okay=False),
+@click.option("--foxglove-layout", "layout", type=click.Path(),
               metavar="FILE.json", help="Also write a Foxglove layout for the MCAP (3-D robot "
               "and frustum, axis plots, shot frames).")
-@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+@click.option("--report", type=click.Path(), metavar="REPORT.html",
               help="Also write the HTML report (plots of every axis, top and side views).")
 @click.option("-q", "--quiet", is_flag=True,
               help="No progress display and nothing on stdout (the files asked for are still "
@@ -317,11 +317,11 @@ def convert(shot: str, output: str, summary: str | None, rig_layer: str | None,
 
 
 @main.command()
-@click.argument("shot", type=click.Path(dir_okay=False))
+@click.argument("shot", type=click.Path())
 @convert_options
 @more_convert_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
-@click.option("--report", type=click.Path(dir_okay=False), metavar="REPORT.html",
+@click.option("--report", type=click.Path(), metavar="REPORT.html",
               help="Also write the HTML report; for a shot that cannot be done it shows "
               "where and why.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress display (the report is printed).")
@@ -359,7 +359,7 @@ def check(shot: str, as_json: bool, report: str | None, quiet: bool, **kw: Any) 
 
 
 @main.command()
-@click.argument("mcap_file", type=click.Path(dir_okay=False))
+@click.argument("mcap_file", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(mcap_file: str, as_json: bool) -> None:
     """Show what a camtraj MCAP file holds: shot, frames, duration, rate, topics, limits."""
@@ -444,8 +444,8 @@ def _controller_counts(controller: dict[str, Any] | None) -> list[str]:
 
 
 @main.command("report")
-@click.argument("mcap_file", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.argument("mcap_file", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(),
               metavar="REPORT.html", help="The HTML file to write (atomically).")
 def report_command(mcap_file: str, output: str) -> None:
     """Write the HTML report of a converted take (MCAP_FILE): one self-contained page with

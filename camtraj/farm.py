@@ -739,9 +739,9 @@ def farm_group() -> None:
     help="openjd: OpenJD job template (YAML, or JSON for a .json file); "
     "opencue: OpenCue job spec XML plus JOB.tasks.json.",
 )
-@click.argument("shots", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.argument("shots", nargs=-1, required=True, type=click.Path())
 @click.option(
-    "-o", "--output", "job_file", required=True, type=click.Path(dir_okay=False), help="Job file."
+    "-o", "--output", "job_file", required=True, type=click.Path(), help="Job file."
 )
 @click.option(
     "--outdir",
@@ -831,7 +831,7 @@ def export_command(
 
 
 @farm_group.command("run-task")
-@click.argument("manifest", type=click.Path(dir_okay=False))
+@click.argument("manifest", type=click.Path())
 @click.argument("index", type=click.IntRange(min=1))
 @click.pass_context
 def run_task_command(ctx: click.Context, manifest: str, index: int) -> None:

@@ -208,7 +208,7 @@ def convert_options(func: F) -> F:
         ),
         click.option(
             "--robot",
-            type=click.Path(exists=True, dir_okay=False),
+            type=click.Path(),
             metavar="ROBOT.toml",
             help="Robot description file (default: the built-in robot).",
         ),
@@ -250,7 +250,7 @@ def more_convert_options(func: F) -> F:
     decorators = [
         click.option(
             "--set-file",
-            type=click.Path(exists=True, dir_okay=False),
+            type=click.Path(),
             metavar="SET.toml",
             help="A TOML file whose [placement] table places the robot; --placement wins.",
         ),
@@ -293,7 +293,7 @@ def more_convert_options(func: F) -> F:
         ),
         click.option(
             "--lens",
-            type=click.Path(exists=True, dir_okay=False),
+            type=click.Path(),
             metavar="LENS.toml",
             help="Lens file: drive its zoom, focus and iris motors from the shot's lens, "
             "timed with the joints (default: the robot file's [lens], if any).",

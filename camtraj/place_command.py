@@ -20,20 +20,20 @@ __all__ = ["place_command"]
 @click.command("place", epilog="Exit codes: 0 a placement can do the shot (every shot of a "
                "scene); 2 bad input; 3 no placement can (the reason is printed; for a scene, "
                "the smallest split of its shots into layouts).")
-@click.argument("shots", nargs=-1, type=click.Path(dir_okay=False), metavar="[SHOT]...")
-@click.option("--scene", type=click.Path(dir_okay=False), metavar="SCENE.toml",
+@click.argument("shots", nargs=-1, type=click.Path(), metavar="[SHOT]...")
+@click.option("--scene", type=click.Path(), metavar="SCENE.toml",
               help="A scene file listing the shots and each one's camera, frames and timing "
                    "(instead of SHOT...).")
-@click.option("--robot", type=click.Path(exists=True, dir_okay=False), metavar="ROBOT.toml",
+@click.option("--robot", type=click.Path(), metavar="ROBOT.toml",
               help="Robot description file (default: the built-in robot).")
-@click.option("--set-file", type=click.Path(exists=True, dir_okay=False), metavar="SET.toml",
+@click.option("--set-file", type=click.Path(), metavar="SET.toml",
               help="Floor height and region, keep-out polygons, yaw range, obstacles.")
 @click.option("--camera", metavar="PRIM",
               help="Camera prim path of every shot (default: the only camera).")
 @click.option("--frames", metavar="A:B", help="Film frame range of every shot (inclusive).")
 @click.option("--clearance", type=click.FloatRange(0.0, 5.0), metavar="M",
               help="Distance [m] to keep from the obstacles (default: the set file's).")
-@click.option("--lens", type=click.Path(exists=True, dir_okay=False), metavar="LENS.toml",
+@click.option("--lens", type=click.Path(), metavar="LENS.toml",
               help="Lens file: its zoom, focus and iris motors are timed with the joints, as "
                    "convert --lens times them (default: the robot file's [lens], if any).")
 @click.option("--edges", type=click.Choice(EDGE_OPTIONS), default="still", show_default=True,
@@ -48,7 +48,7 @@ __all__ = ["place_command"]
 @click.option("--top", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Placements to list (one shot; a scene lists its best).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="PLACED.toml",
+@click.option("-o", "--output", type=click.Path(), metavar="PLACED.toml",
               help="Write the best placement as a set file for convert --set-file (for a "
                    "scene, named by its layout: the scene's name or PLACED's).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")

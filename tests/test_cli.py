@@ -720,3 +720,31 @@ def start_from_values(text: str) -> np.ndarray:
 
     return np.array([math.radians(float(v)) if REVOLUTE[i] else float(v)
                      for i, v in enumerate(text.split(","))])
+
+
+def test_every_command_words_a_missing_or_folder_input_its_own_way(tmp_path: Path) -> None:
+    """A missing robot, lens or set file, or a folder given as a shot, an MCAP file or an
+    output, is camtraj's one line naming the file and what it is, in every command (click's
+    own checks said "Invalid value for '--robot': File ... does not exist" for some options
+    and commands, camtraj's wording for the rest)."""
+    missing = tmp_path / "gone.toml"
+    runs = run_all({
+        "robot": ("convert", MAYA, "-o", tmp_path / "a.mcap", "--robot", missing),
+        "lens": ("check", MAYA, "--lens", tmp_path),
+        "set": ("place", MAYA, "--set-file", missing),
+        "shot": ("batch", tmp_path, "-o", tmp_path / "b"),
+        "farm": ("farm", "export", missing.with_suffix(".usda"), "-o", tmp_path / "j.json",
+                 "--format", "openjd"),
+        "mcap": ("info", tmp_path),
+        "output": ("convert", MAYA, "-o", tmp_path),
+    })
+    expected = {
+        "robot": ("robot file", "gone.toml"), "lens": ("lens file is a folder",),
+        "set": ("set file", "gone.toml"), "shot": (str(tmp_path),),
+        "farm": ("gone.usda", "no such"), "mcap": ("the MCAP file is a folder",),
+        "output": ("cannot write -o", "it is a folder"),
+    }
+    for key, proc in runs.items():
+        assert proc.returncode == 2, (key, proc.stderr)
+        line = error_line(proc)
+        assert "Invalid value" not in line and all(w in line for w in expected[key]), (key, line)
