@@ -84,7 +84,7 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
             span = _parse_frames(frames) if frames else None
             layout_name = None
             if scene is not None or len(shots) > 1:
-                from camtraj.scene import Scene, SceneShot
+                from camtraj.scene_file import Scene, SceneShot
 
                 if scene is not None:
                     if camera is not None or frames is not None or timing is not None:

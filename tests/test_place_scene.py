@@ -191,7 +191,7 @@ def test_a_scene_no_layout_serves_is_split_into_groups_that_work(
 
 def test_the_scene_file_names_its_shots_options(tmp_path: Path) -> None:
     """Per-shot frames and timing in a scene file; errors name the file and the key."""
-    from camtraj.scene import Scene
+    from camtraj.scene_file import Scene
 
     f = tmp_path / "s.toml"
     f.write_text('[[shot]]\npath = "/abs/left.usda"\nframes = [1, 20]\ntiming = "scale"\n'
@@ -262,7 +262,8 @@ def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
     import shutil
 
     from camtraj.errors import InputError
-    from camtraj.scene import SceneShot, _no_repeats
+    from camtraj.scene import _no_repeats
+    from camtraj.scene_file import SceneShot
 
     shot = tmp_path / "a.usda"
     samples = Path(__file__).resolve().parents[1] / "samples" / "shots"
@@ -414,7 +415,7 @@ def test_the_scene_search_takes_the_same_steps_whatever_the_jobs(
 def test_shots_of_one_stage_file_are_told_apart_by_camera_and_frames() -> None:
     """Trial 21: previs keeps several cameras in one stage file, and the scene's table, its
     split and its JSON named each shot by the file alone ('a.usda | a.usda, a.usda')."""
-    from camtraj.scene import SceneShot
+    from camtraj.scene_file import SceneShot
 
     dolly = SceneShot("stage.usda", "/World/cams/dolly")
     crane = SceneShot("stage.usda", "/World/cams/crane", (1001, 1048), "scale")
@@ -432,7 +433,8 @@ def test_a_shot_no_placement_can_do_alone_fails_the_scene_before_any_search(
     search and the split's (trial 21: 44 s to say what its own cheap tests say in a second)."""
     import camtraj.scene as scene_module
     from camtraj.errors import PlacementError
-    from camtraj.scene import SceneShot, place_scene
+    from camtraj.scene import place_scene
+    from camtraj.scene_file import SceneShot
 
     def no_search(*args: object, **kwargs: object) -> None:
         raise AssertionError("searched")
