@@ -72,6 +72,7 @@ from camtraj.outputs import (
     refuse_overlaps,
     remove_stale_temps,
 )
+from camtraj.scene_file import Scene, SceneShot
 from camtraj.shown import frame_span, speed_percent
 from camtraj.workers import default_jobs, mp_context, start_workers_early, worker_environment
 
@@ -142,29 +143,40 @@ def write_json_atomic(path: Path, data: Any) -> None:
     write_text_atomic(path, jsonsafe.dumps(data) + "\n")
 
 
-def output_names(shots: Sequence[str], outdir: Path) -> list[tuple[Path, Path]]:
-    """The MCAP and summary paths of each shot: ``OUTDIR/<stem>.mcap``, ``<stem>.summary.json``.
+def output_names(shots: Sequence[str | SceneShot], outdir: Path) -> list[tuple[Path, Path]]:
+    """The MCAP and summary paths of each shot: ``OUTDIR/<stem>.mcap``, ``<stem>.summary.json``;
+    a scene's shots of one stem that name their camera or frames (several cameras of one
+    stage file) add them: ``<stem>_<camera's name>_<first>-<last>``.
 
     Raises:
         InputError: A shot is not a USD file, or two shots share a stem (they would write the
             same outputs; stems are compared ignoring case, as some file systems do).
     """
+    members = [s if isinstance(s, SceneShot) else SceneShot(s) for s in shots]
+    count: dict[str, int] = {}
+    for m in members:
+        key = Path(m.path).stem.casefold()
+        count[key] = count.get(key, 0) + 1
     seen: dict[str, str] = {}
     names: list[tuple[Path, Path]] = []
-    for shot in shots:
-        path = Path(shot)
+    for m in members:
+        path = Path(m.path)
         if path.suffix.lower() not in SHOT_SUFFIXES:
-            msg = f"{shot}: not a USD shot (expected one of {', '.join(SHOT_SUFFIXES)})"
+            msg = f"{m.path}: not a USD shot (expected one of {', '.join(SHOT_SUFFIXES)})"
             raise InputError(msg)
-        key = path.stem.casefold()
+        stem = path.stem
+        if count[stem.casefold()] > 1:
+            stem += "".join([f"_{m.camera.rsplit('/', 1)[-1]}" if m.camera else "",
+                             f"_{m.frames[0]}-{m.frames[1]}" if m.frames else ""])
+        key = stem.casefold()
         if key in seen:
             msg = (
-                f"{seen[key]} and {shot} would both write {outdir / path.stem}.mcap; "
+                f"{seen[key]} and {m.name} would both write {outdir / stem}.mcap; "
                 "rename one of them or convert them in separate batches"
             )
             raise InputError(msg)
-        seen[key] = shot
-        names.append((outdir / f"{path.stem}.mcap", outdir / f"{path.stem}.summary.json"))
+        seen[key] = m.name
+        names.append((outdir / f"{stem}.mcap", outdir / f"{stem}.summary.json"))
     return names
 
 
@@ -223,6 +235,7 @@ class ShotResult:
             earlier run (the batch removes nothing), else None.
         notes: For a failed shot, what ``convert`` says with its error (what to try, where a
             hold or a jump is), each naming the shot.
+        camera, frame_range: A scene's shot's own camera and frames (``--scene``), else None.
     """
 
     shot: str
@@ -238,6 +251,19 @@ class ShotResult:
     warnings: tuple[str, ...] = ()
     earlier_output: str | None = None
     notes: tuple[str, ...] = ()
+    camera: str | None = None
+    frame_range: tuple[int, int] | None = None
+
+    @property
+    def name(self) -> str:
+        """The shot in messages: its path, and a scene's camera and frames."""
+        return SceneShot(self.shot, self.camera, self.frame_range).name
+
+    @property
+    def label(self) -> str:
+        """The shot in the table: its file's name, and a scene's camera (the frames have
+        their column)."""
+        return SceneShot(Path(self.shot).name, self.camera).name
 
     def to_json(self) -> dict[str, Any]:
         """This result as a JSON-able dict."""
@@ -257,6 +283,8 @@ class ShotResult:
             "cpu_seconds": round(self.cpu_seconds, 3),
             "earlier_output": self.earlier_output,
             "notes": list(self.notes),
+            "camera": self.camera,
+            "frame_range": list(self.frame_range) if self.frame_range else None,
         }
 
 
@@ -327,7 +355,7 @@ class BatchReport:
             time_text = f"{r.seconds:.1f} s" if r.status != "skipped" else "-"
             rows.append(
                 (
-                    Path(r.shot).name,
+                    r.label,
                     _format_frames(r.summary.get("frames")),
                     status,
                     _format_speed(r.summary.get("max_speed")),
@@ -381,13 +409,16 @@ def _format_speed(speed: Any) -> str:
 
 
 def _convert_one(
-    shot: str, output: str, summary_path: str, options: ConvertOptions, rig_layer: str | None
+    shot: str, output: str, summary_path: str, options: ConvertOptions, rig_layer: str | None,
+    name: str | None = None,
 ) -> dict[str, Any]:
     """Worker: convert one shot; never raises (the outcome comes back as a plain dict).
 
     SIGINT and SIGTERM stop the shot (its outputs are discarded, as ``convert``'s); between
     shots the worker ignores them. A shot that starts after the batch was stopped is not run.
+    ``name``: the shot in its warnings and notes (a scene's: with its camera and frames).
     """
+    name = name or str(Path(shot))
     start = time.perf_counter()
     cpu_start = time.process_time()
     held = _ShotWarnings()  # said by the batch if the shot converts or cannot be done
@@ -417,8 +448,9 @@ def _convert_one(
         if isinstance(speed, float) and math.isfinite(speed):
             outcome["summary"] = {"max_speed": speed}
         if isinstance(exc, InfeasibleError):  # what reading the shot warned of is often why
-            outcome["warnings"] = _named(shot, [*held.texts, *exc.shot_warnings])
-        outcome["notes"] = _named(shot, [f"note: {n}" for n in getattr(exc, "__notes__", [])])
+            outcome["warnings"] = _named(name, [*held.texts, *exc.shot_warnings], shot)
+        outcome["notes"] = _named(name, [f"note: {n}" for n in getattr(exc, "__notes__", [])],
+                                   shot)
     except Exception as exc:  # a bug: report it as this shot's failure and go on
         outcome = {
             "status": "failed",
@@ -438,7 +470,8 @@ def _convert_one(
         # what the shot's reader logged, then the run's own warnings (the summary's, which
         # convert prints with its report), each once, naming the shot as the reader does
         outcome = {"status": "ok", "summary": summary,
-                   "warnings": _named(shot, [*held.texts, *summary.get("warnings", [])])}
+                   "warnings": _named(name, [*held.texts, *summary.get("warnings", [])],
+                                              shot)}
     finally:
         interrupts.ignore()
         logging.getLogger().removeHandler(held)
@@ -447,11 +480,11 @@ def _convert_one(
     return outcome
 
 
-def _named(shot: str, warnings: list[str]) -> list[str]:
-    """Each warning once, naming the shot as the reader's own do."""
-    named = str(Path(shot))
-    return list(dict.fromkeys(w if w.startswith(f"{named}: ") else f"{named}: {w}"
-                              for w in warnings))
+def _named(named: str, warnings: list[str], shot: str) -> list[str]:
+    """Each warning once, naming the shot (``named``, a scene's with its camera and frames)
+    as the reader's own name its file (``shot``): once, at the start."""
+    path = f"{Path(shot)}: "
+    return list(dict.fromkeys(f"{named}: {w.removeprefix(path)}" for w in warnings))
 
 
 class _ShotWarnings(logging.Handler):
@@ -536,7 +569,7 @@ def _result(shot: str, names: tuple[Path, Path], future: cf.Future[dict[str, Any
 
 
 def run_batch(
-    shots: Sequence[str],
+    shots: Sequence[str | SceneShot],
     outdir: str | os.PathLike[str],
     *,
     jobs: int | None = None,
@@ -544,18 +577,22 @@ def run_batch(
     options: ConvertOptions,
     progress: bool = False,
     rig_layers: bool = False,
+    scene_file: str | None = None,
 ) -> BatchReport:
     """Convert ``shots`` into ``outdir`` in parallel and write ``outdir/batch_report.json``.
 
     Args:
-        shots: USD shot paths. Their stems must be distinct.
+        shots: USD shot paths (their stems distinct), or a scene's shots, each with its own
+            camera, frames and timing (:func:`output_names` names them).
         outdir: Output folder, created with its parents if missing (:mod:`camtraj.folders`).
         jobs: Worker processes (default: the CPUs this process may use); at most one per shot.
         force: Convert every shot even if its outputs are up to date.
-        options: Convert options, the same for every shot.
+        options: Convert options, the same for every shot (but a scene's shot's own camera,
+            frames and timing).
         progress: Show one overall tqdm progress bar on stderr.
         rig_layers: Also write each shot's USD rig layer, ``OUTDIR/NAME.rig.usda``; a shot
             whose rig layer is missing or older than the shot is not up to date.
+        scene_file: The scene file the shots come from (no output may replace it).
 
     Returns:
         The report. Failed shots are in it; they do not raise.
@@ -571,6 +608,9 @@ def run_batch(
     out = Path(outdir)
     names = output_names(shots, out)
     jobs = default_jobs(jobs)
+    paths = [s.path if isinstance(s, SceneShot) else s for s in shots]
+    each = [replace(options, camera=s.camera, frames=s.frames, timing=s.timing)
+            if isinstance(s, SceneShot) else options for s in shots]
 
     # The workers' outputs are checked here, all together, before any shot runs: no output
     # is an input of the batch (a shot, a layer it uses, the robot or set file), no two
@@ -579,7 +619,8 @@ def run_batch(
     planned = [(p, f"{label} {one_line(p)}") for pair in names
                for p, label in zip(_shot_outputs(*pair, rig_layers), labels, strict=False)]
     refuse_overlaps([*planned, (out / REPORT_NAME, str(out / REPORT_NAME))],
-                    files_read(shots, options))
+                    [*files_read(paths, options),
+                     *([] if scene_file is None else [(Path(scene_file), "the scene file")])])
 
     # The files every shot reads (robot, lens, set file) are read once, here: a bad one is
     # one error before anything runs, not the same failure on every shot.
@@ -591,7 +632,8 @@ def run_batch(
     made = make_parent(out / REPORT_NAME, "-o")
     try:
         check_destination(out / REPORT_NAME, "the batch report")  # written last: checked first
-        return _run_shots(shots, names, out, options, jobs, force, progress, rig_layers, start)
+        return _run_shots(shots, names, out, options, each, jobs, force, progress, rig_layers,
+                          start)
     except BaseException:  # stopped before its report: the folders it made go if still empty
         remove_empty(made)
         raise
@@ -602,17 +644,21 @@ def _shot_outputs(mcap: Path, summary: Path, rig_layers: bool) -> list[Path]:
     return [mcap, summary, *([rig_layer_for(mcap)] if rig_layers else [])]
 
 
-def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
-               options: ConvertOptions, jobs: int, force: bool, progress: bool,
-               rig_layers: bool, start: float) -> BatchReport:
-    """:func:`run_batch`'s work once its outputs are checked and its folder is made."""
+def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]], out: Path,
+               options: ConvertOptions, each: list[ConvertOptions], jobs: int, force: bool,
+               progress: bool, rig_layers: bool, start: float) -> BatchReport:
+    """:func:`run_batch`'s work once its outputs are checked and its folder is made
+    (``each``: every shot's own options)."""
     remove_stale_temps(out)
 
-    wanted = json.loads(json.dumps(recorded_options(options)))  # as read back from a summary
+    shots = [s.path if isinstance(s, SceneShot) else s for s in given]
+    scene = {i: (s.camera, s.frames) for i, s in enumerate(given) if isinstance(s, SceneShot)}
+    scene_names = {i: s.name for i, s in enumerate(given) if isinstance(s, SceneShot)}
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
     for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):
         outputs = _shot_outputs(mcap, summary, rig_layers)
+        camera, frame_range = scene.get(i, (None, None))
         reason = _unreadable(shot)
         if reason is not None:
             results[i] = ShotResult(
@@ -623,13 +669,16 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
                 reason=reason,
                 exit_code=2,
                 error="ShotFileError",
+                camera=camera,
+                frame_range=frame_range,
             )
             continue
         # every file the run reads (the shot, the USD layers it uses, the robot, set and lens
         # files): an edited sublayer makes the take out of date too
-        inputs = [path for path, _ in files_read([shot], options)]
+        inputs = [path for path, _ in files_read([shot], each[i])]
         if not force and _up_to_date(outputs, inputs):
             previous = _read_summary(summary)
+            wanted = json.loads(json.dumps(recorded_options(each[i])))  # as read back
             if (previous.get(OPTIONS_KEY) == wanted
                     and previous.get(SOURCE_KEY) == os.path.realpath(shot)):
                 results[i] = ShotResult(
@@ -640,6 +689,8 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
                     reason="up to date",
                     summary=previous,
                     warnings=tuple(f"{Path(shot)}: {w}" for w in previous.get("warnings", [])),
+                    camera=camera,
+                    frame_range=frame_range,
                 )
                 continue
         todo.append(i)
@@ -671,19 +722,22 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
                         shots[i],
                         str(names[i][0]),
                         str(names[i][1]),
-                        options,
+                        each[i],
                         str(rig_layer_for(names[i][0])) if rig_layers else None,
+                        scene_names.get(i),
                     ): i
                     for i in todo
                 }
             try:
                 for future in cf.as_completed(futures):
                     i = futures[future]
-                    result = _result(shots[i], names[i], future)
+                    result = replace(_result(shots[i], names[i], future),
+                                     camera=scene.get(i, (None, None))[0],
+                                     frame_range=scene.get(i, (None, None))[1])
                     results[i] = result
                     for text in (*result.notes, *result.warnings):  # as convert says them
                         bar.write(text, file=sys.stderr)
-                    bar.set_postfix_str(f"{Path(shots[i]).name}: {result.status}", refresh=False)
+                    bar.set_postfix_str(f"{result.label}: {result.status}", refresh=False)
                     bar.update(1)
             except KeyboardInterrupt as exc:
                 # A SIGTERM may have been sent to this process alone (a farm scheduler
@@ -721,7 +775,9 @@ def _run_shots(shots: Sequence[str], names: list[tuple[Path, Path]], out: Path,
         "input; 3 every failed shot was infeasible; 1 an unexpected error."
     ),
 )
-@click.argument("shots", nargs=-1, required=True, type=click.Path())
+@click.argument("shots", nargs=-1, type=click.Path(), metavar="[SHOT]...")
+@click.option("--scene", type=click.Path(), metavar="SCENE.toml",
+              help="Convert a scene file's shots, each with its camera, frames and timing.")
 @click.option(
     "-o",
     "--outdir",
@@ -746,6 +802,7 @@ def batch_command(
     ctx: click.Context,
     /,
     shots: tuple[str, ...],
+    scene: str | None,
     outdir: str,
     jobs: int | None,
     force: bool,
@@ -755,15 +812,30 @@ def batch_command(
 ) -> None:
     """Convert many SHOTS in parallel into OUTDIR, skipping shots that are up to date.
 
+    With --scene, the scene file's shots (each with its camera, frames and timing; the
+    scene's set file unless --set-file names one, such as the one place -o wrote).
     Prints a table (shot, frames, status, max feasible speed, time) and writes
     OUTDIR/batch_report.json. Failed shots do not stop the others.
     """
+    if (scene is None) == (not shots):
+        raise click.UsageError("give the shots or --scene SCENE.toml (one of them)")
+    per_shot = (option_args["camera"] is not None or option_args["frames"] is not None
+                or ctx.get_parameter_source("timing") is not click.core.ParameterSource.DEFAULT)
+    if scene is not None and per_shot:
+        raise click.UsageError("with --scene, give --camera, --frames and --timing per shot in "
+                               "the scene file")
     start_workers_early()
     try:
+        given: Sequence[str | SceneShot] = shots
+        if scene is not None:
+            parsed = Scene.read(scene)
+            given = parsed.shots
+            option_args["set_file"] = option_args["set_file"] or parsed.set_file
         options = build_options(**option_args)
         report = run_batch(
-            shots,
+            given,
             outdir,
+            scene_file=scene,
             jobs=jobs,
             force=force,
             options=options,
@@ -776,7 +848,7 @@ def batch_command(
         ctx.exit(exc.exit_code)
     click.echo(report.table())
     for r in report.failed:
-        click.echo(one_line(f"ERROR: {r.shot}: {r.reason}"), err=True)
+        click.echo(one_line(f"ERROR: {r.name}: {r.reason}"), err=True)
         if r.earlier_output is not None:
             click.echo(one_line(f"note: {r.earlier_output} is from an earlier run, not this "
                                 f"version of {Path(r.shot).name}"), err=True)

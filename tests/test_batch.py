@@ -568,3 +568,48 @@ def test_a_failed_shot_keeps_converts_notes(tmp_path: Path) -> None:
     assert entry["notes"] == [f"{shot}: {note}"]
     assert f"{shot}: {note}" in proc.stderr.splitlines()
     assert np.isfinite(entry["max_speed"])
+
+
+def test_a_scene_converts_each_shot_with_its_own_camera_frames_and_timing(
+        tmp_path: Path) -> None:
+    """`batch --scene` (trial 21 retyped every shot's camera and frames): each shot of the
+    scene file is converted with its own options, byte for byte what `convert` writes with
+    them; two spans of one stage file get outputs named by their frames; a second run finds
+    every shot up to date; a scene with shots or per-shot options on the command line is a
+    usage error."""
+    for name in ("maya_dolly_push_in", "blender_crane_up"):
+        shutil.copy2(SAMPLES / f"{name}.usda", tmp_path / f"{name}.usda")
+    scene = tmp_path / "sc.toml"
+    scene.write_text('name = "sc1"\n'
+                     '[[shot]]\npath = "maya_dolly_push_in.usda"\nframes = [1001, 1060]\n'
+                     '[[shot]]\npath = "maya_dolly_push_in.usda"\nframes = [1061, 1120]\n'
+                     'timing = "scale"\n'
+                     '[[shot]]\npath = "blender_crane_up.usda"\ncamera = "/root/Camera"\n',
+                     encoding="utf-8")
+    out = tmp_path / "out"
+    proc = _run("batch", "--scene", str(scene), "-o", str(out), "--jobs", "2")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / REPORT_NAME).read_text())
+    got = [(Path(s["output"]).name, s["camera"], s["frame_range"], s["status"])
+           for s in report["shots"]]
+    assert got == [("maya_dolly_push_in_1001-1060.mcap", None, [1001, 1060], "ok"),
+                   ("maya_dolly_push_in_1061-1120.mcap", None, [1061, 1120], "ok"),
+                   ("blender_crane_up.mcap", "/root/Camera", None, "ok")]
+    assert "blender_crane_up.usda /root/Camera" in proc.stdout
+    singles = {
+        "maya_dolly_push_in_1001-1060": ("--frames", "1001:1060"),
+        "maya_dolly_push_in_1061-1120": ("--frames", "1061:1120", "--timing", "scale"),
+        "blender_crane_up": ("--camera", "/root/Camera"),
+    }
+    for stem, args in singles.items():
+        shot = tmp_path / f"{stem.split('_10')[0]}.usda"
+        single = _run("convert", str(shot), "-o", str(tmp_path / f"{stem}.mcap"), "-q", *args)
+        assert single.returncode == 0, single.stderr
+        assert (tmp_path / f"{stem}.mcap").read_bytes() == (out / f"{stem}.mcap").read_bytes()
+    again = _run("batch", "--scene", str(scene), "-o", str(out))
+    assert again.returncode == 0 and "0 converted, 3 up to date" in again.stdout
+    both = _run("batch", "--scene", str(scene), str(tmp_path / "blender_crane_up.usda"),
+                "-o", str(out))
+    framed = _run("batch", "--scene", str(scene), "--frames", "1:3", "-o", str(out))
+    assert both.returncode == framed.returncode == 2
+    assert "one of them" in both.stderr and "per shot in the scene file" in framed.stderr
