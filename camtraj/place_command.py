@@ -102,6 +102,10 @@ def place_command(ctx: click.Context, /, shots: tuple[str, ...], scene: str | No
                     layout_name = Path(output).stem if output is not None else "scene"
             if output is not None:  # checked before the search, like every command's outputs
                 outputs.add(output, "-o")
+                if set_file is not None:  # and the set file can take a new placement
+                    from camtraj.set_file import SetFile
+
+                    to_toml(0.0, 0.0, 0.0, 0.0, SetFile.read(set_file).text)
                 given = [m.path for m in members] if layout_name is not None else list(shots)
                 outputs.refuse_inputs([
                     *files_read(given, ConvertOptions(robot=robot, set_file=set_file,

@@ -31,12 +31,14 @@ line naming the file, the key and the allowed range.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tomlkit
+import tomlkit.exceptions
 from numpy.typing import NDArray
 
 from camtraj.errors import InputError
@@ -202,38 +204,63 @@ def to_toml(x: float, y: float, z: float, yaw_deg: float, text: str = "",
             layout: str | None = None) -> str:
     """A set file: ``text`` (a set file's own, "" for none) with its ``[placement]`` at x, y,
     z [m] and yaw_deg, and the layout's name when given; every other line, comments
-    included, as it was (tomlkit edits the document in place). The numbers are written as
-    they are (read back, :func:`yaw_pose` gives the transform bit for bit: a yaw recovered
-    from the matrix, -136.88000000000002, gave another, and a shot's speed can change with
-    the last bit)."""
-    doc = tomlkit.parse(text) if text.strip() else _new_document()
-    table = doc.get("placement")
-    if table is None:
-        table = tomlkit.table()
-        table.comment("robot base in the converted world: metres, Z-up (camtraj place)")
-        doc.add("placement", table)
-    for key in ("x", "y", "z", "yaw_deg", "rotation", "layout"):
-        table.pop(key, None)
-    table.update({"x": float(x), "y": float(y), "z": float(z), "yaw_deg": float(yaw_deg)})
+    included, as it was (tomlkit edits the document: the placement's values where they stand,
+    a ``rotation`` and an old ``layout`` removed, a missing key or table added at its end; new
+    lines with the file's own line ending). The numbers are written as they are (read back,
+    :func:`yaw_pose` gives the transform bit for bit: a yaw recovered from the matrix,
+    -136.88000000000002, gave another, and a shot's speed can change with the last bit).
+
+    Raises:
+        InputError: The document cannot be edited so (a placement written in a form tomlkit
+            cannot change).
+    """
+    values: dict[str, Any] = {"x": float(x), "y": float(y), "z": float(z),
+                              "yaw_deg": float(yaw_deg)}
     if layout is not None:
-        table["layout"] = layout
-    return doc.as_string()
+        values["layout"] = layout
+
+    def edit(doc: tomlkit.TOMLDocument) -> None:
+        table = doc.get("placement")
+        if table is None:
+            table = tomlkit.table()
+            table.comment("robot base in the converted world: metres, Z-up (camtraj place)")
+            doc.add("placement", table)
+        for key in ("rotation", "layout"):
+            if key in table and key not in values:
+                del table[key]
+        for key, value in values.items():
+            table[key] = value
+
+    return _edited(text, edit)
 
 
 def with_clearance_text(text: str, clearance_m: float) -> str:
-    """A set file's ``text`` with ``[collision] clearance_m`` set, every other line kept."""
-    doc = tomlkit.parse(text) if text.strip() else _new_document()
-    if "collision" not in doc:
-        doc.add("collision", tomlkit.table())
-    doc["collision"]["clearance_m"] = float(clearance_m)  # type: ignore[index]
-    return doc.as_string()
+    """A set file's ``text`` with ``[collision] clearance_m`` set, every other line kept
+    (:func:`to_toml`'s rules)."""
+    def edit(doc: tomlkit.TOMLDocument) -> None:
+        if "collision" not in doc:
+            doc.add("collision", tomlkit.table())
+        doc["collision"]["clearance_m"] = float(clearance_m)  # type: ignore[index]
+
+    return _edited(text, edit)
 
 
-def _new_document() -> tomlkit.TOMLDocument:
-    doc = tomlkit.document()
-    doc.add(tomlkit.comment("camtraj set file (written by camtraj place)"))
-    doc.add(tomlkit.nl())
-    return doc
+def _edited(text: str, edit: Callable[[tomlkit.TOMLDocument], None]) -> str:
+    """``text`` (a set file's, "" for a new one) as ``edit`` changes its document, with the
+    text's own line ending throughout."""
+    try:
+        if text.strip():
+            doc = tomlkit.parse(text)
+        else:
+            doc = tomlkit.document()
+            doc.add(tomlkit.comment("camtraj set file (written by camtraj place)"))
+            doc.add(tomlkit.nl())
+        edit(doc)
+        out = doc.as_string()
+    except (tomlkit.exceptions.TOMLKitError, KeyError, TypeError, ValueError) as exc:
+        msg = f"the set file cannot be written with a new placement ({exc})"
+        raise InputError(msg) from exc
+    return out.replace("\r\n", "\n").replace("\n", "\r\n") if "\r\n" in text else out
 
 
 def _number(value: Any, where: str, key: str, lo: float, hi: float) -> float:

@@ -129,6 +129,21 @@ def test_place_keeps_the_set_files_comments_and_replaces_only_its_placement() ->
         "x": 1.0, "y": 2.0, "z": 0.18, "yaw_deg": 30.0, "layout": "sc 12"}}
     fresh = to_toml(1.0, 2.0, 0.18, 30.0)
     assert fresh.startswith("# camtraj set file") and SetFile.parse(fresh).base2world is not None
+    # placed again: every line where it was, the values changed in place, CRLF kept (review
+    # 57: the keys moved below the next table's comment, with LF endings among CRLF ones)
+    placed = ("# stage 4\r\n[placement]\r\nx = 1.0  # tape mark\r\ny = 2.0\r\nz = 0.18\r\n"
+              "yaw_deg = 30.0\r\nlayout = \"sc 12\"\r\n\r\n# floor: measured\r\n[floor]\r\n"
+              "height = 0.0\r\n")
+    assert to_toml(-3.5, 4.0, 0.18, 12.5, placed) == placed.replace(
+        "x = 1.0", "x = -3.5").replace("y = 2.0", "y = 4.0").replace(
+        "yaw_deg = 30.0", "yaw_deg = 12.5").replace('layout = "sc 12"\r\n', "")
+    # a placement written with dotted keys or as an inline table is edited as written
+    for written in ("placement.x = 1.0\nplacement.y = 2.0\nplacement.z = 0.0\n"
+                    "placement.yaw_deg = 3.0\n[floor]\nheight = 0.0\n",
+                    "placement = {x = 1.0, y = 2.0, z = 0.0, yaw_deg = 3.0}\n"):
+        out = to_toml(5.0, 6.0, 0.18, 7.0, written)
+        assert tomllib.loads(out)["placement"] == {"x": 5.0, "y": 6.0, "z": 0.18, "yaw_deg": 7.0}
+        assert out.count("\n") == written.count("\n")
 
 
 def test_file_without_placement_places_at_the_origin(tmp_path: Path) -> None:
