@@ -768,6 +768,16 @@ def test_quaternions_known_rotations() -> None:
     assert not np.signbit(quat_from_matrix(np.eye(3))).any()  # no -0.0
 
 
+def test_a_damaged_quaternion_reads_as_nan_not_a_raise() -> None:
+    """A quaternion of no length or not finite (a damaged file's) gives a NaN matrix, which
+    the readers report where they read it; scipy's Rotation raises on it."""
+    quats = np.array([[0.0, 0.0, 0.0, 0.0], [np.inf, 0.0, 0.0, 1.0], [np.nan, 0.0, 0.0, 1.0],
+                      [0.0, 0.0, 0.0, 2.0]])
+    m = matrix_from_quat(quats)
+    assert m.shape == (4, 3, 3) and np.isnan(m[:3]).all()
+    np.testing.assert_array_equal(m[3], np.eye(3))
+
+
 def test_quaternions_random_and_near_half_turns() -> None:
     rng = np.random.default_rng(7)
     axes = rng.normal(size=(3000, 3))

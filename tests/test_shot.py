@@ -613,6 +613,11 @@ def test_a_turnaround_between_two_frames_is_no_hold(robot: Robot) -> None:
     # a hold of two pairs at the turning point, and an equal pair at either end, stay holds
     long_hold = np.concatenate([cam[:24], cam[23:24], cam[24:]])
     assert camera_holds(long_hold)[[22, 23, 24]].tolist() == [False, True, True]
+    # a stop between a truck and a crane at right angles (nothing turns back) stays a hold
+    corner = np.tile(np.eye(4), (8, 1, 1))
+    corner[:, :3, 3] = [(0, 0, 0), (0.1, 0, 0), (0.2, 0, 0), (0.2, 0, 0), (0.2, 0, 0.1),
+                        (0.2, 0, 0.2), (0.2, 0, 0.3), (0.2, 0, 0.4)]
+    assert camera_holds(corner).tolist() == [False, False, True, False, False, False, False]
     ends = np.concatenate([cam[:1], cam, cam[-1:]])
     held = camera_holds(ends)
     assert held[0] and held[-1] and not held[1:-1].any()

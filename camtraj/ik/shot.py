@@ -62,8 +62,9 @@ the rotation) are a hold of the camera."""
 def camera_holds(targets: Array) -> NDArray[np.bool_]:
     """Per frame pair, whether the camera (or flange) holds still, shape (n - 1,): its poses
     are equal (:data:`HOLD_POSE_TOL`), but for a turnaround: one equal pair alone between
-    moving frames, where the camera comes back the way it came (no part of the pose,
-    position or orientation, goes on in the direction it had). A move symmetric about a
+    moving frames, where the camera comes back the way it came (a part of the pose, position
+    or orientation, turns back and none goes on in the direction it had; a stop between
+    moves at right angles stays a hold). A move symmetric about a
     turning point half-way between two frames has those two frames equal: held, the robot
     stopped dead there and the take of an out-and-back push ran at 66% of real time, the
     same move turning on a frame at 381% (trial 23). A hold of one pair where the camera
@@ -74,9 +75,10 @@ def camera_holds(targets: Array) -> NDArray[np.bool_]:
     lone = k[held[k] & ~held[k - 1] & ~held[k + 1]]
     if lone.size:
         before, after = steps[lone - 1, :3], steps[lone + 1, :3]
-        goes_on = ((np.einsum("kij,kij->k", before[:, :, 3:], after[:, :, 3:]) > 0.0)
-                   | (np.einsum("kij,kij->k", before[:, :, :3], after[:, :, :3]) > 0.0))
-        held[lone[~goes_on]] = False
+        parts = np.stack([np.einsum("kij,kij->k", before[:, :, 3:], after[:, :, 3:]),
+                          np.einsum("kij,kij->k", before[:, :, :3], after[:, :, :3])])
+        turns = (parts < 0.0).any(axis=0) & ~(parts > 0.0).any(axis=0)
+        held[lone[turns]] = False
     return held
 
 
