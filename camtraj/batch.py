@@ -47,7 +47,13 @@ from typing import Any, Literal
 import click
 
 from camtraj import __version__, interrupts, jsonsafe
-from camtraj.errors import CamtrajError, InfeasibleError, InputError, failure_lines
+from camtraj.errors import (
+    CamtrajError,
+    InfeasibleError,
+    InputError,
+    failure_lines,
+    note_lines,
+)
 from camtraj.folders import check_can_make, make_parent, remove_empty
 from camtraj.inputs import (
     files_read,
@@ -145,18 +151,14 @@ def write_json_atomic(path: Path, data: Any) -> None:
 
 def output_names(shots: Sequence[str | SceneShot], outdir: Path) -> list[tuple[Path, Path]]:
     """The MCAP and summary paths of each shot: ``OUTDIR/<stem>.mcap``, ``<stem>.summary.json``;
-    a scene's shots of one stem that name their camera or frames (several cameras of one
-    stage file) add them: ``<stem>_<camera's name>_<first>-<last>``.
+    a scene's shot that names its camera or frames adds them (several cameras or spans of
+    one stage file): ``<stem>_World_cam_<first>-<last>`` for camera /World/cam.
 
     Raises:
         InputError: A shot is not a USD file, or two shots share a stem (they would write the
             same outputs; stems are compared ignoring case, as some file systems do).
     """
     members = [s if isinstance(s, SceneShot) else SceneShot(s) for s in shots]
-    count: dict[str, int] = {}
-    for m in members:
-        key = Path(m.path).stem.casefold()
-        count[key] = count.get(key, 0) + 1
     seen: dict[str, str] = {}
     names: list[tuple[Path, Path]] = []
     for m in members:
@@ -164,10 +166,9 @@ def output_names(shots: Sequence[str | SceneShot], outdir: Path) -> list[tuple[P
         if path.suffix.lower() not in SHOT_SUFFIXES:
             msg = f"{m.path}: not a USD shot (expected one of {', '.join(SHOT_SUFFIXES)})"
             raise InputError(msg)
-        stem = path.stem
-        if count[stem.casefold()] > 1:
-            stem += "".join([f"_{m.camera.rsplit('/', 1)[-1]}" if m.camera else "",
-                             f"_{m.frames[0]}-{m.frames[1]}" if m.frames else ""])
+        stem = path.stem + "".join([f"_{m.camera.strip('/').replace('/', '_')}" if m.camera
+                                    else "",
+                                    f"_{m.frames[0]}-{m.frames[1]}" if m.frames else ""])
         key = stem.casefold()
         if key in seen:
             msg = (
@@ -235,7 +236,8 @@ class ShotResult:
             earlier run (the batch removes nothing), else None.
         notes: For a failed shot, what ``convert`` says with its error (what to try, where a
             hold or a jump is), each naming the shot.
-        camera, frame_range: A scene's shot's own camera and frames (``--scene``), else None.
+        camera, frame_range, timing: A scene's shot's own camera, frames and timing
+            (``--scene``), else None (the batch's options).
     """
 
     shot: str
@@ -253,6 +255,7 @@ class ShotResult:
     notes: tuple[str, ...] = ()
     camera: str | None = None
     frame_range: tuple[int, int] | None = None
+    timing: str | None = None
 
     @property
     def name(self) -> str:
@@ -285,6 +288,7 @@ class ShotResult:
             "notes": list(self.notes),
             "camera": self.camera,
             "frame_range": list(self.frame_range) if self.frame_range else None,
+            "timing": self.timing,
         }
 
 
@@ -449,8 +453,7 @@ def _convert_one(
             outcome["summary"] = {"max_speed": speed}
         if isinstance(exc, InfeasibleError):  # what reading the shot warned of is often why
             outcome["warnings"] = _named(name, [*held.texts, *exc.shot_warnings], shot)
-        outcome["notes"] = _named(name, [f"note: {n}" for n in getattr(exc, "__notes__", [])],
-                                   shot)
+        outcome["notes"] = _named(name, note_lines(exc), shot)
     except Exception as exc:  # a bug: report it as this shot's failure and go on
         outcome = {
             "status": "failed",
@@ -652,13 +655,17 @@ def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]],
     remove_stale_temps(out)
 
     shots = [s.path if isinstance(s, SceneShot) else s for s in given]
-    scene = {i: (s.camera, s.frames) for i, s in enumerate(given) if isinstance(s, SceneShot)}
-    scene_names = {i: s.name for i, s in enumerate(given) if isinstance(s, SceneShot)}
+    # a scene's shots: their own camera, frames and timing, and their names in messages
+    scene: dict[int, dict[str, Any]] = {
+        i: {"camera": s.camera, "frame_range": s.frames, "timing": s.timing}
+        for i, s in enumerate(given) if isinstance(s, SceneShot)}
+    named = {i: s.name if isinstance(s, SceneShot) else str(Path(s))
+             for i, s in enumerate(given)}
     results: list[ShotResult | None] = [None] * len(shots)
     todo: list[int] = []
     for i, (shot, (mcap, summary)) in enumerate(zip(shots, names, strict=True)):
         outputs = _shot_outputs(mcap, summary, rig_layers)
-        camera, frame_range = scene.get(i, (None, None))
+        own = scene.get(i, {})
         reason = _unreadable(shot)
         if reason is not None:
             results[i] = ShotResult(
@@ -669,8 +676,7 @@ def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]],
                 reason=reason,
                 exit_code=2,
                 error="ShotFileError",
-                camera=camera,
-                frame_range=frame_range,
+                **own,
             )
             continue
         # every file the run reads (the shot, the USD layers it uses, the robot, set and lens
@@ -688,9 +694,8 @@ def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]],
                     status="skipped",
                     reason="up to date",
                     summary=previous,
-                    warnings=tuple(f"{Path(shot)}: {w}" for w in previous.get("warnings", [])),
-                    camera=camera,
-                    frame_range=frame_range,
+                    warnings=tuple(_named(named[i], previous.get("warnings", []), shot)),
+                    **own,
                 )
                 continue
         todo.append(i)
@@ -724,16 +729,14 @@ def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]],
                         str(names[i][1]),
                         each[i],
                         str(rig_layer_for(names[i][0])) if rig_layers else None,
-                        scene_names.get(i),
+                        named[i],
                     ): i
                     for i in todo
                 }
             try:
                 for future in cf.as_completed(futures):
                     i = futures[future]
-                    result = replace(_result(shots[i], names[i], future),
-                                     camera=scene.get(i, (None, None))[0],
-                                     frame_range=scene.get(i, (None, None))[1])
+                    result = replace(_result(shots[i], names[i], future), **scene.get(i, {}))
                     results[i] = result
                     for text in (*result.notes, *result.warnings):  # as convert says them
                         bar.write(text, file=sys.stderr)
@@ -782,7 +785,7 @@ def _run_shots(given: Sequence[str | SceneShot], names: list[tuple[Path, Path]],
     "-o",
     "--outdir",
     required=True,
-    type=click.Path(file_okay=False),
+    type=click.Path(),
     help="Folder for NAME.mcap, NAME.summary.json and batch_report.json.",
 )
 @click.option(

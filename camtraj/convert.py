@@ -650,8 +650,9 @@ def hold_note(held: NDArray[np.bool_], frames: NDArray[np.int_],
     note = (f"the limits are exceeded where the camera {said}{more}: the robot holds still "
             "where the camera does, so a move that reaches a hold still decelerating (or "
             "leaves it at once) must stop (or start) within a frame; ")
-    lone = int(np.count_nonzero(held[starts] & ~held[np.minimum(starts + 1, held.size - 1)]
-                                & (starts + 1 < held.size)))
+    one_pair = starts[(starts + 1 >= held.size) | ~held[np.minimum(starts + 1, held.size - 1)]]
+    lone = sum(any(r[0] - HOLD_EDGE_FRAMES <= frames[k] <= r[1] + HOLD_EDGE_FRAMES for r in runs)
+               for k in one_pair)  # holds of two frames beside the limits' runs
     if lone >= TWOS_HOLDS:
         return note + (f"the camera holds a pose for just two frames {lone} times (a move "
                        "animated on twos?): bake it on ones for a smooth move")

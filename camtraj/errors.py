@@ -194,6 +194,10 @@ def frame_ranges(frames: list[int]) -> str:
 def failure_lines(exc: CamtrajError) -> list[str]:
     """What a command prints on stderr when it stops on ``exc``: the error, its notes (what
     to try), and what reading the shot warned of (often the reason)."""
-    return [f"ERROR: {exc}",
-            *(one_line(f"note: {note}") for note in getattr(exc, "__notes__", [])),
+    return [f"ERROR: {exc}", *note_lines(exc),
             *(one_line(f"warning: {w}") for w in getattr(exc, "shot_warnings", ()))]
+
+
+def note_lines(exc: BaseException) -> list[str]:
+    """The notes of ``exc`` (what to try, where a hold or a jump is), one line each."""
+    return [one_line(f"note: {note}") for note in getattr(exc, "__notes__", [])]

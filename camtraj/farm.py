@@ -745,7 +745,7 @@ def farm_group() -> None:
 )
 @click.option(
     "--outdir",
-    type=click.Path(file_okay=False),
+    type=click.Path(),
     help="Folder the tasks write NAME.mcap and NAME.summary.json to (default: the job file's).",
 )
 @click.option(

@@ -13,7 +13,6 @@ The scene file is :mod:`camtraj.scene_file`.
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ from camtraj.place import (
     search,
     with_clearance,
 )
-from camtraj.scene_file import SceneShot
+from camtraj.scene_file import SceneShot, refuse_repeats
 from camtraj.set_file import SetFile
 from camtraj.shown import speed_percent
 from camtraj.workers import default_jobs
@@ -133,7 +132,7 @@ def place_scene(
                for s in shots]
     for s, opt in zip(shots, options, strict=True):
         require_regular_files(s.path, opt)
-    _no_repeats(shots)
+    refuse_repeats(shots)
     rob = load_robot(options[0])
     sf = SetFile.read(set_file) if set_file is not None else SetFile()
     problems: list[Problem] = []
@@ -168,8 +167,7 @@ def place_scene(
             try:
                 passing_screen(runner.problems, (i,), sf, meters_per_unit=mpu, up_axis=up)
             except PlacementError as exc:
-                msg = f"{shots[i].name}: no placement can do it on its own: {exc}"
-                raise PlacementError(msg) from None
+                raise PlacementError(_alone(shots[i], str(exc))) from None
         layout: Layout | None = None
         reason = ""
         region: dict[str, Any] = {}
@@ -226,29 +224,6 @@ def serving_everyone(runner: Any, split: list[tuple[tuple[int, ...], Layout]],
     return max(good, key=Layout.rank) if good else None
 
 
-def _no_repeats(shots: Sequence[SceneShot]) -> None:
-    """A shot listed twice (the same file, under any name, with the same camera and frames)
-    is a mistake in the list, not a second shot.
-
-    Raises:
-        InputError: Naming both places in the list.
-    """
-    seen: dict[tuple[int, int, str | None, tuple[int, int] | None], int] = {}
-    for k, s in enumerate(shots):
-        try:
-            st = os.stat(s.path)
-        except (OSError, ValueError):  # a missing shot: the reader says so, as bad input
-            continue
-        key = (st.st_dev, st.st_ino, s.camera, s.frames)
-        if key in seen:
-            first = seen[key]
-            msg = (f"shot {k + 1} ({s.name}) repeats shot {first + 1} "
-                   f"({shots[first].name}): the same file, camera and frames; list each "
-                   "shot once")
-            raise InputError(msg)
-        seen[key] = k
-
-
 def _best_ok(group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]],
              group: tuple[int, ...]) -> Layout | None:
     try:
@@ -258,6 +233,11 @@ def _best_ok(group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, 
     return best if best.ok else None
 
 
+def _alone(shot: SceneShot, why: str) -> str:
+    """Why a scene cannot be placed: one of its shots cannot be, even on its own."""
+    return f"{shot.name}: no placement can do it even on its own ({why})"
+
+
 def _no_split(shots: Sequence[SceneShot],
               group_search: Callable[[tuple[int, ...]], tuple[list[Layout], int, Any]]) -> str:
     """Why no split works: the first shot that no placement can do on its own."""
@@ -265,10 +245,9 @@ def _no_split(shots: Sequence[SceneShot],
         try:
             best = group_search((i,))[0][0]
         except PlacementError as exc:
-            return f"{s.name}: no placement can do it on its own: {exc}"
+            return _alone(s, str(exc))
         if not best.ok:
-            return f"{s.name}: no placement can do it on its own; the best: " \
-                   f"{best.results[i].reason}"
+            return _alone(s, f"the best: {best.results[i].reason}")
     if len(shots) > MAX_SPLIT_SHOTS:
         return (f"no single layout serves every shot, and a scene of more than "
                 f"{MAX_SPLIT_SHOTS} shots gets no split proposal: place it in smaller groups")

@@ -19,6 +19,7 @@ The scene file (TOML; paths relative to it)::
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -90,6 +91,7 @@ class Scene:
             msg = f'{where}: list the shots as [[shot]] tables, each with a path = "…"'
             raise InputError(msg)
         parsed = tuple(_shot(s, base, f"{where}: [[shot]] {k + 1}") for k, s in enumerate(shots))
+        refuse_repeats(parsed)
         return cls(one_line(path), parsed, name,
                    None if set_file is None else str(base / set_file))
 
@@ -101,7 +103,10 @@ def _shot(table: dict[str, Any], base: Path, where: str) -> SceneShot:
         msg = f'{where}: path = "SHOT.usda" is required'
         raise InputError(msg)
     camera = table.get("camera")
-    if camera is not None and not (isinstance(camera, str) and camera.startswith("/")):
+    if camera is not None and not (isinstance(camera, str) and camera.startswith("/")
+                                   and all(part and part.isprintable() and not any(
+                                       c.isspace() for c in part)
+                                       for part in camera[1:].split("/"))):
         msg = f"{where}: camera must be a prim path such as /World/cam"
         raise InputError(msg)
     frames = table.get("frames")
@@ -118,3 +123,26 @@ def _shot(table: dict[str, Any], base: Path, where: str) -> SceneShot:
         msg = f"{where}: timing must be one of {', '.join(TIMING_MODES)}, got {timing!r}"
         raise InputError(msg)
     return SceneShot(str(base / path), camera, frames, timing)
+
+
+def refuse_repeats(shots: Sequence[SceneShot]) -> None:
+    """A shot listed twice (the same file, under any name, with the same camera and frames)
+    is a mistake in the list, not a second shot.
+
+    Raises:
+        InputError: Naming both places in the list.
+    """
+    seen: dict[tuple[int, int, str | None, tuple[int, int] | None], int] = {}
+    for k, s in enumerate(shots):
+        try:
+            st = os.stat(s.path)
+        except (OSError, ValueError):  # a missing shot: the reader says so, as bad input
+            continue
+        key = (st.st_dev, st.st_ino, s.camera, s.frames)
+        if key in seen:
+            first = seen[key]
+            msg = (f"shot {k + 1} ({s.name}) repeats shot {first + 1} "
+                   f"({shots[first].name}): the same file, camera and frames; list each "
+                   "shot once")
+            raise InputError(msg)
+        seen[key] = k

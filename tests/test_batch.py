@@ -15,9 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from camtraj.batch import REPORT_NAME, run_batch
+from camtraj.batch import REPORT_NAME, output_names, run_batch
 from camtraj.errors import InputError
 from camtraj.options import build_options, options_to_args
+from camtraj.scene_file import SceneShot
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples" / "shots"
@@ -590,19 +591,20 @@ def test_a_scene_converts_each_shot_with_its_own_camera_frames_and_timing(
     proc = _run("batch", "--scene", str(scene), "-o", str(out), "--jobs", "2")
     assert proc.returncode == 0, proc.stderr
     report = json.loads((out / REPORT_NAME).read_text())
-    got = [(Path(s["output"]).name, s["camera"], s["frame_range"], s["status"])
+    got = [(Path(s["output"]).name, s["camera"], s["frame_range"], s["timing"], s["status"])
            for s in report["shots"]]
-    assert got == [("maya_dolly_push_in_1001-1060.mcap", None, [1001, 1060], "ok"),
-                   ("maya_dolly_push_in_1061-1120.mcap", None, [1061, 1120], "ok"),
-                   ("blender_crane_up.mcap", "/root/Camera", None, "ok")]
+    assert got == [("maya_dolly_push_in_1001-1060.mcap", None, [1001, 1060], "shot", "ok"),
+                   ("maya_dolly_push_in_1061-1120.mcap", None, [1061, 1120], "scale", "ok"),
+                   ("blender_crane_up_root_Camera.mcap", "/root/Camera", None, "shot", "ok")]
     assert "blender_crane_up.usda /root/Camera" in proc.stdout
     singles = {
-        "maya_dolly_push_in_1001-1060": ("--frames", "1001:1060"),
-        "maya_dolly_push_in_1061-1120": ("--frames", "1061:1120", "--timing", "scale"),
-        "blender_crane_up": ("--camera", "/root/Camera"),
+        "maya_dolly_push_in_1001-1060": ("maya_dolly_push_in", "--frames", "1001:1060"),
+        "maya_dolly_push_in_1061-1120": ("maya_dolly_push_in", "--frames", "1061:1120",
+                                         "--timing", "scale"),
+        "blender_crane_up_root_Camera": ("blender_crane_up", "--camera", "/root/Camera"),
     }
-    for stem, args in singles.items():
-        shot = tmp_path / f"{stem.split('_10')[0]}.usda"
+    for stem, (name, *args) in singles.items():
+        shot = tmp_path / f"{name}.usda"
         single = _run("convert", str(shot), "-o", str(tmp_path / f"{stem}.mcap"), "-q", *args)
         assert single.returncode == 0, single.stderr
         assert (tmp_path / f"{stem}.mcap").read_bytes() == (out / f"{stem}.mcap").read_bytes()
@@ -613,3 +615,19 @@ def test_a_scene_converts_each_shot_with_its_own_camera_frames_and_timing(
     framed = _run("batch", "--scene", str(scene), "--frames", "1:3", "-o", str(out))
     assert both.returncode == framed.returncode == 2
     assert "one of them" in both.stderr and "per shot in the scene file" in framed.stderr
+    # two cameras of one name under different parents get their own outputs; a shot listed
+    # twice (here through a link) and a camera that is no prim path are one error line
+    twice = tmp_path / "twice.toml"
+    (tmp_path / "link.usda").symlink_to(tmp_path / "blender_crane_up.usda")
+    for text, words in (
+            ('[[shot]]\npath = "blender_crane_up.usda"\n[[shot]]\npath = "link.usda"\n',
+             "repeats shot 1"),
+            ('[[shot]]\npath = "blender_crane_up.usda"\ncamera = "/root/ Cam"\n',
+             "camera must be a prim path")):
+        twice.write_text(text, encoding="utf-8")
+        bad = _run("batch", "--scene", str(twice), "-o", str(tmp_path / "twice"))
+        assert bad.returncode == 2 and words in bad.stderr, bad.stderr
+        assert len(bad.stderr.strip().splitlines()) == 1
+    names = output_names([SceneShot("a/sh.usda", "/World/sh010/cam"),
+                          SceneShot("a/sh.usda", "/World/sh020/cam")], Path("out"))
+    assert [m.name for m, _ in names] == ["sh_World_sh010_cam.mcap", "sh_World_sh020_cam.mcap"]

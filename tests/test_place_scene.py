@@ -262,8 +262,7 @@ def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
     import shutil
 
     from camtraj.errors import InputError
-    from camtraj.scene import _no_repeats
-    from camtraj.scene_file import SceneShot
+    from camtraj.scene_file import SceneShot, refuse_repeats
 
     shot = tmp_path / "a.usda"
     samples = Path(__file__).resolve().parents[1] / "samples" / "shots"
@@ -281,10 +280,10 @@ def test_a_shot_listed_twice_is_one_error_line(tmp_path: Path) -> None:
         assert words in proc.stderr and "repeats shot 1" in proc.stderr, proc.stderr
         assert not placed.exists()
     # another frame range or camera of the same file is another shot
-    _no_repeats([SceneShot(str(shot), None, (1, 20)), SceneShot(str(shot), None, (21, 40)),
+    refuse_repeats([SceneShot(str(shot), None, (1, 20)), SceneShot(str(shot), None, (21, 40)),
                  SceneShot(str(shot), "/cam", (1, 20))])
     with pytest.raises(InputError, match=r"shot 3 .* repeats shot 1"):
-        _no_repeats([SceneShot(str(shot)), SceneShot(str(shot), "/cam"),
+        refuse_repeats([SceneShot(str(shot)), SceneShot(str(shot), "/cam"),
                      SceneShot(str(tmp_path / "b.usda"))])
 
 
@@ -443,6 +442,6 @@ def test_a_shot_no_placement_can_do_alone_fails_the_scene_before_any_search(
     shots = [SceneShot(str(scene["shots"][n])) for n in ("left", "far", "right")]
     with pytest.raises(PlacementError) as caught:
         place_scene(shots, name="t", set_file=str(scene["dir"] / "set.toml"), jobs=1)
-    assert str(caught.value).startswith(f"{scene['shots']['far']}: no placement can do it on "
-                                        "its own: ")
+    assert str(caught.value).startswith(f"{scene['shots']['far']}: no placement can do it "
+                                        "even on its own (")
     assert caught.value.exit_code == 3
