@@ -6,6 +6,8 @@ import contextlib
 import multiprocessing
 import multiprocessing.context
 import os
+import signal
+import threading
 from collections.abc import Iterator
 
 from camtraj.errors import InputError
@@ -39,12 +41,20 @@ imported instead of the installed package and every worker failed)."""
 
 @contextlib.contextmanager
 def worker_environment() -> Iterator[None]:
-    """Set :data:`WORKER_ENV` (where the user has not) while worker processes are started."""
+    """Set :data:`WORKER_ENV` (where the user has not) while worker processes are started,
+    and start them with SIGINT ignored: Ctrl-C signals the whole process group, and the fork
+    server, importing the pipeline in its first second, printed a KeyboardInterrupt
+    traceback under the command's one line (trial 22). The command stops its workers
+    itself; a shot handles the signals while it runs (:func:`camtraj.interrupts.install`)."""
     added = [k for k in WORKER_ENV if k not in os.environ]
     os.environ.update({k: WORKER_ENV[k] for k in added})
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
         yield
     finally:
+        if main:
+            signal.signal(signal.SIGINT, before)
         for k in added:
             os.environ.pop(k, None)
 

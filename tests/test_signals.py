@@ -490,3 +490,42 @@ def test_a_stop_python_cannot_raise_is_kept_off_stderr_and_raised_at_the_next_ch
         for s, h in old.items():
             signal.signal(s, h)
         sys.unraisablehook = old_hook
+
+
+def test_ctrl_c_while_the_batch_workers_start_is_one_line(tmp_path: Path) -> None:
+    """Ctrl-C signals the whole process group. Sent as soon as the batch's worker fork
+    server exists (it spends its first second importing the pipeline), it printed that
+    import's KeyboardInterrupt traceback under the batch's one line (trial 22); the workers
+    start with SIGINT ignored now, and the batch stops them itself."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    script = tmp_path / "camtraj"  # the console script: its name installs the handlers
+    script.write_text("import sys\nfrom camtraj.__main__ import run\n"
+                      "if __name__ == '__main__':\n    sys.exit(run())\n")
+    samples = ROOT / "samples" / "shots"
+    proc = subprocess.Popen(
+        [sys.executable, str(script), "batch", str(samples / "maya_dolly_push_in.usda"),
+         str(samples / "blender_crane_up.usda"), "-o", str(tmp_path / "out"), "-q"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True)
+    start = time.monotonic()
+    try:
+        while not any(b"forkserver" in _cmdline(p) for p in _descendants(proc.pid)):
+            assert proc.poll() is None, "the batch ended before its fork server started"
+            assert time.monotonic() - start < TIMEOUT, "no fork server started"
+            time.sleep(0.005)
+        time.sleep(0.1)  # into its import of camtraj.convert
+        os.killpg(proc.pid, signal.SIGINT)
+        err = proc.communicate(timeout=TIMEOUT)[1].decode()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert "Traceback" not in err, err
+    assert proc.returncode == 130, err
+    assert len(err.splitlines()) == 1 and err.startswith("ERROR: stopped by SIGINT"), err
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
