@@ -39,7 +39,7 @@ from camtraj.errors import (
 )
 from camtraj.ik import PathSolution, camera_holds, solve_path_report
 from camtraj.ik.path import move_to_start
-from camtraj.inputs import one_line, require_regular_file, require_regular_files, run_inputs
+from camtraj.inputs import require_regular_file, require_regular_files, run_inputs
 from camtraj.mcap_io import TakeData, write_take_to
 from camtraj.options import ConvertOptions
 from camtraj.outputs import OutputSet
@@ -152,9 +152,9 @@ def placement_notes(options: ConvertOptions, sf: SetFile | None, placement: Plac
     the rail at the placement leaves its floor region or crosses a keep-out (checked as
     ``place`` checks its candidates: the rail's footprint). ``sf``: the set file read from
     ``options.set_file``."""
-    if sf is None or options.set_file is None:
+    if sf is None:
         return ()
-    where = one_line(options.set_file)
+    where = sf.source
     if sf.base2world is None and options.placement is None:
         return (f"the set file {where} has no [placement]: the robot base stands at the "
                 "stage origin (camtraj place -o writes a set file with one)",)
